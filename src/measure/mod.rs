@@ -1,0 +1,2 @@
+//! Measurements, one module each: slanted-edge SFR, relative illumination,
+//! uniform-region noise, line profiles, MCC patch means, comparisons.

@@ -1,0 +1,110 @@
+//! The optical image: spectral irradiance at the sensor plane, W/(m²·nm),
+//! for a rectangular window of the full film, with per-pixel object labels,
+//! depth and Monte Carlo standard error.
+
+use crate::spectrum::WavelengthGrid;
+use serde::{Deserialize, Serialize};
+
+/// A pixel rectangle of the full film.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub struct Rect {
+    pub x: u32,
+    pub y: u32,
+    pub w: u32,
+    pub h: u32,
+}
+
+impl Rect {
+    pub fn new(x: u32, y: u32, w: u32, h: u32) -> Self {
+        Self { x, y, w, h }
+    }
+    pub fn contains(&self, x: u32, y: u32) -> bool {
+        x >= self.x && y >= self.y && x < self.x + self.w && y < self.y + self.h
+    }
+    pub fn area(&self) -> u64 {
+        self.w as u64 * self.h as u64
+    }
+    /// Smallest rectangle holding both.
+    pub fn union(&self, o: &Rect) -> Rect {
+        let x0 = self.x.min(o.x);
+        let y0 = self.y.min(o.y);
+        let x1 = (self.x + self.w).max(o.x + o.w);
+        let y1 = (self.y + self.h).max(o.y + o.h);
+        Rect::new(x0, y0, x1 - x0, y1 - y0)
+    }
+}
+
+/// Spectral irradiance image (a window of the full film).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct OpticalImage {
+    /// Full film size in pixels.
+    pub full_width: u32,
+    pub full_height: u32,
+    /// The window this image holds (the whole film unless ROI-rendered).
+    pub window: Rect,
+    /// Film pixel pitch, metres.
+    pub pixel_pitch_m: f64,
+    pub grid: WavelengthGrid,
+    /// Irradiance, row-major over the window, band fastest: index (y·w + x)·n + band.
+    pub irradiance: Vec<f32>,
+    /// Standard error of each irradiance value (same layout), from independent
+    /// sample batches; empty when not computed.
+    pub stderr: Vec<f32>,
+    /// Object label per pixel (index into `label_names`, or `scene::NO_OBJECT`).
+    pub labels: Vec<u32>,
+    /// Object names indexed by label.
+    pub label_names: Vec<String>,
+    /// Distance along the primary ray to the first hit, metres (inf on escape).
+    pub depth_m: Vec<f32>,
+    /// Samples per pixel, render time and non-finite samples rejected.
+    pub spp: u32,
+    pub render_s: f64,
+    pub nan_count: u64,
+}
+
+impl OpticalImage {
+    /// A zero image of the given window.
+    pub fn new(full_width: u32, full_height: u32, window: Rect, pixel_pitch_m: f64, grid: WavelengthGrid) -> Self {
+        let n = window.area() as usize;
+        let nb = grid.len();
+        Self {
+            full_width,
+            full_height,
+            window,
+            pixel_pitch_m,
+            irradiance: vec![0.0; n * nb],
+            stderr: vec![],
+            labels: vec![crate::scene::NO_OBJECT; n],
+            label_names: vec![],
+            depth_m: vec![f32::INFINITY; n],
+            grid,
+            spp: 0,
+            render_s: 0.0,
+            nan_count: 0,
+        }
+    }
+    pub fn width(&self) -> u32 {
+        self.window.w
+    }
+    pub fn height(&self) -> u32 {
+        self.window.h
+    }
+    pub fn bands(&self) -> usize {
+        self.grid.len()
+    }
+    /// Spectrum of window pixel (x, y).
+    pub fn pixel(&self, x: u32, y: u32) -> &[f32] {
+        let nb = self.bands();
+        let i = (y as usize * self.window.w as usize + x as usize) * nb;
+        &self.irradiance[i..i + nb]
+    }
+    pub fn pixel_mut(&mut self, x: u32, y: u32) -> &mut [f32] {
+        let nb = self.bands();
+        let i = (y as usize * self.window.w as usize + x as usize) * nb;
+        &mut self.irradiance[i..i + nb]
+    }
+    /// Label id of a named object, if present.
+    pub fn label_id(&self, name: &str) -> Option<u32> {
+        self.label_names.iter().position(|n| n == name).map(|i| i as u32)
+    }
+}

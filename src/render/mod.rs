@@ -1,0 +1,1 @@
+//! The spectral path tracer: BVH, materials, lights, integrator, film.

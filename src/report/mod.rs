@@ -1,0 +1,1 @@
+//! Reports: HTML (minijinja + plotters SVG) and diff across results.

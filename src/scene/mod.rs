@@ -1,0 +1,5 @@
+//! Scenes: the model, loaders (meshes, pbrt), and measurement targets.
+
+pub mod model;
+
+pub use model::*;

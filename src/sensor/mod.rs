@@ -1,0 +1,1 @@
+//! The image sensor model: spectral irradiance → electrons → volts → digital values.
