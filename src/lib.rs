@@ -12,6 +12,7 @@ pub mod image;
 pub mod measure;
 pub mod optical_image;
 pub mod optics;
+pub mod params;
 pub mod render;
 pub mod report;
 pub mod scene;
