@@ -255,7 +255,7 @@ impl Scene {
 /// parallel to the view direction).
 pub fn look_at_to_world(pose: &CameraPose) -> Option<DMat4> {
     let f = pose.look_at - pose.position;
-    if !(f.length() > 0.0) || !f.is_finite() {
+    if !f.is_finite() || f.length() <= 0.0 {
         return None;
     }
     let f = f.normalize();
