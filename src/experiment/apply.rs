@@ -202,10 +202,11 @@ pub fn check_generic(name: &str, v: &Value) -> R<()> {
         _ => false,
     };
     if numeric && !units::has_unit(name) {
-        return Err(
-            ApplyError::new(format!("'{name}' is a number without a unit in its name"))
-                .help(units::unit_help(name)),
-        );
+        return Err(ApplyError::new(format!(
+            "'{name}' holds a number but its name has no unit: expected a unit suffix, e.g. {}",
+            units::suggest_unit(name)
+        ))
+        .help(units::unit_help(name)));
     }
     Ok(())
 }

@@ -242,6 +242,14 @@ pub fn parse_kdl(map: &SourceMap, file: usize) -> Result<kdl::KdlDocument, Locat
                 msg = format!("{msg} ({label})");
             }
             let mut help = d.and_then(|d| d.help.clone());
+            let near_paren = f
+                .text
+                .as_bytes()
+                .get(off.saturating_sub(1)..(off + 1).min(f.text.len()))
+                .is_some_and(|w| w.contains(&b'('));
+            if near_paren {
+                help = Some("a list of numbers is written (x y z), numbers separated by spaces; a '(name)' glued to a value is a KDL type annotation, which camsim does not use".into());
+            }
             if help.is_none() {
                 help = Some(
                     "see docs/experiment-language.md for the KDL v2 syntax camsim reads".into(),

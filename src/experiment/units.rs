@@ -153,7 +153,7 @@ pub fn suggest_unit(name: &str) -> String {
 /// The help text for a number under a unit-less name.
 pub fn unit_help(name: &str) -> String {
     format!(
-        "expected a unit suffix, e.g. {}; units are part of every numeric name (-m, -mm, -um, -nm, -s, -deg, -e, -v, -dv, -w-sr-m2-nm, …)",
+        "write {}=…; units are part of every numeric name (-m, -mm, -um, -nm, -s, -deg, -e, -v, -dv, -w-sr-m2-nm, …)",
         suggest_unit(name)
     )
 }
