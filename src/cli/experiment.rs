@@ -14,7 +14,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 #[derive(Args)]
 pub struct CheckArgs {
-    /// Experiment files to validate.
+    /// Experiment files (or directories of *.kdl files) to validate.
     #[arg(required = true)]
     pub files: Vec<PathBuf>,
 }
@@ -54,7 +54,7 @@ pub struct MergeArgs {
 pub fn check(a: CheckArgs) -> Result<i32> {
     hooks::install_defaults();
     let mut bad = 0;
-    for f in &a.files {
+    for f in &collect(&a.files)? {
         match experiment::parse_file(f, Loader::Disk).and_then(|p| {
             if p.kind == DocKind::Experiment {
                 experiment::plan(&p, None).map(|pl| (p, pl.variants.len()))
