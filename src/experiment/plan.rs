@@ -66,18 +66,22 @@ pub fn plan(parsed: &Parsed, seed: Option<u64>) -> Result<Plan, Located> {
     })
 }
 
-/// Hash of everything a variant's results depend on.
+/// Hash of everything a variant's results depend on: camsim's version, the
+/// resolved spec (without file-system paths, so the same experiment run from
+/// another directory or checkout hashes the same), the id and swept values, and
+/// the *contents* of every referenced file.
 pub fn input_hash(v: &Variant, parsed: &Parsed) -> String {
     let mut h = Sha256::new();
     h.update(b"camsim ");
     h.update(crate::version().as_bytes());
     h.update(b"\n");
-    h.update(serde_json::to_vec(&v.spec).unwrap_or_default());
+    let mut spec = serde_json::to_value(&v.spec).unwrap_or_default();
+    strip_paths(&mut spec, true);
+    h.update(serde_json::to_vec(&spec).unwrap_or_default());
     h.update(b"\n");
     h.update(v.id.as_bytes());
     h.update(serde_json::to_vec(&v.params).unwrap_or_default());
     for f in v.spec.referenced_files() {
-        h.update(f.to_string_lossy().as_bytes());
         match parsed.loader.read(&f) {
             Ok(t) => h.update(Sha256::digest(t.as_bytes())),
             Err(_) => match std::fs::read(&f) {
@@ -87,6 +91,27 @@ pub fn input_hash(v: &Variant, parsed: &Parsed) -> String {
         }
     }
     hex::encode(h.finalize())
+}
+
+/// Remove resolved paths: the experiment's `file` and `bases` (top level) and
+/// the `path` of every file reference (which keeps its `written` form).
+fn strip_paths(v: &mut serde_json::Value, top: bool) {
+    match v {
+        serde_json::Value::Object(m) => {
+            if top {
+                m.remove("file");
+                m.remove("bases");
+            }
+            if m.contains_key("written") {
+                m.remove("path");
+            }
+            for x in m.values_mut() {
+                strip_paths(x, false);
+            }
+        }
+        serde_json::Value::Array(a) => a.iter_mut().for_each(|x| strip_paths(x, false)),
+        _ => {}
+    }
 }
 
 impl Plan {

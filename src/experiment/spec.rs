@@ -192,6 +192,18 @@ impl ResolvedExperiment {
             }
         }
         v.extend(self.bases.iter().cloned());
+        // Spectra read from CSV files (`spectrum="data.csv#column"`).
+        let dir = self.file.parent().unwrap_or(std::path::Path::new(""));
+        for m in &self.measures {
+            for val in m.params.0.values() {
+                if let Value::String(s) = val
+                    && let Some((file, _)) = s.split_once('#')
+                    && file.ends_with(".csv")
+                {
+                    v.push(dir.join(file));
+                }
+            }
+        }
         v
     }
 }
