@@ -179,15 +179,23 @@ fn embedded_list_matches_the_experiments_directory() {
 fn hashes_do_not_depend_on_how_the_file_is_reached() {
     let a = plan_of("experiments/fig07-lsf-mtf.kdl");
     let b = plan_of("tests/../experiments/fig07-lsf-mtf.kdl");
-    let abs = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("experiments/fig07-lsf-mtf.kdl");
+    let abs =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("experiments/fig07-lsf-mtf.kdl");
     let c = plan_of(abs.to_str().unwrap());
     for ((x, y), z) in a.variants.iter().zip(&b.variants).zip(&c.variants) {
         assert_eq!(x.hash, y.hash);
         assert_eq!(x.hash, z.hash);
     }
     // …but a changed input changes them.
-    let text = std::fs::read_to_string("experiments/fig07-lsf-mtf.kdl").unwrap().replace("spp=1024", "spp=512");
-    let p = experiment::parse_source(Path::new("experiments/fig07-lsf-mtf.kdl"), text, Loader::Disk).unwrap();
+    let text = std::fs::read_to_string("experiments/fig07-lsf-mtf.kdl")
+        .unwrap()
+        .replace("spp=1024", "spp=512");
+    let p = experiment::parse_source(
+        Path::new("experiments/fig07-lsf-mtf.kdl"),
+        text,
+        Loader::Disk,
+    )
+    .unwrap();
     let d = experiment::plan(&p, None).unwrap();
     assert_ne!(a.variants[0].hash, d.variants[0].hash);
 }

@@ -341,3 +341,31 @@ fn bad_shard_flag_is_an_error() {
         stderr(&r)
     );
 }
+
+#[test]
+fn ctrl_c_stops_after_the_variant_in_flight_and_keeps_results() {
+    let tmp = tempfile::tempdir().unwrap();
+    let exp = many_variants(tmp.path());
+    let out = tmp.path().join("out");
+    let (e, o) = (exp.to_str().unwrap(), out.to_str().unwrap());
+    let r = camsim(
+        &["run", e, "--out", o],
+        &[("CAMSIM_TEST_INTERRUPT_AFTER", "5")],
+    );
+    assert_eq!(r.status.code(), Some(130), "{}", stderr(&r));
+    // The partial results and manifest are written.
+    assert_eq!(read_rows(&out.join("many/results.csv")).len(), 5 * 3);
+    let m: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("many/manifest.json")).unwrap()).unwrap();
+    assert_eq!(m["complete"], false);
+    let done = m["variants"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|v| v["status"] == "done")
+        .count();
+    assert_eq!(done, 5);
+    let r = camsim(&["run", e, "--out", o], &[]);
+    assert!(stderr(&r).contains("43 done, 5 cached"), "{}", stderr(&r));
+    assert_eq!(read_rows(&out.join("many/results.csv")).len(), 48 * 3);
+}

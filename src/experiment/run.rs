@@ -10,7 +10,8 @@
 //! Interruption: Ctrl-C (SIGINT) lets the variant in flight finish, then stops
 //! and writes the manifest and partial results. `CAMSIM_TEST_ABORT_AFTER=N`
 //! (testing only) aborts the process like `kill -9` right after the N-th
-//! variant of this process has been written.
+//! variant of this process has been written; `CAMSIM_TEST_INTERRUPT_AFTER=N`
+//! behaves as if Ctrl-C were pressed at that moment.
 
 use super::parse::Parsed;
 use super::plan::{Plan, PlannedVariant};
@@ -140,6 +141,9 @@ pub fn run_plan(plan: &Plan, opts: &RunOptions, progress: &mut dyn Progress) -> 
     let abort_after: Option<usize> = std::env::var("CAMSIM_TEST_ABORT_AFTER")
         .ok()
         .and_then(|s| s.parse().ok());
+    let interrupt_after: Option<usize> = std::env::var("CAMSIM_TEST_INTERRUPT_AFTER")
+        .ok()
+        .and_then(|s| s.parse().ok());
     for v in &mine {
         if opts.interrupted.load(Ordering::SeqCst) {
             sum.interrupted = true;
@@ -172,6 +176,9 @@ pub fn run_plan(plan: &Plan, opts: &RunOptions, progress: &mut dyn Progress) -> 
                     let n = FINISHED_IN_PROCESS.fetch_add(1, Ordering::SeqCst) + 1;
                     if abort_after.is_some_and(|k| n >= k) {
                         std::process::abort();
+                    }
+                    if interrupt_after.is_some_and(|k| n >= k) {
+                        opts.interrupted.store(true, Ordering::SeqCst);
                     }
                     Outcome::Done {
                         figures: figs.len(),
