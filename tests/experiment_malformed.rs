@@ -276,6 +276,16 @@ const CASES: &[(&str, &str, &str)] = &[
         "expected (start stop step)",
     ),
     (
+        "sweep-repeated-value.kdl",
+        "sweep-repeated-value.kdl:4:27",
+        "repeated value 64 in sweep axis 'render.spp'",
+    ),
+    (
+        "zip-repeated-combination.kdl",
+        "zip-repeated-combination.kdl:5:23",
+        "repeated value combination (1, x) in this zip",
+    ),
+    (
         "zip-unequal.kdl",
         "zip-unequal.kdl:7:13",
         "zip axes must have equal lengths",

@@ -213,6 +213,7 @@ pub fn run(a: RunArgs) -> Result<i32> {
         interrupted: interrupted.clone(),
     };
     let mut code = 0;
+    let mut names: std::collections::BTreeMap<String, PathBuf> = Default::default();
     let mut bar = Bar {
         bar: None,
         done: 0,
@@ -228,6 +229,17 @@ pub fn run(a: RunArgs) -> Result<i32> {
             }
         };
         if parsed.kind == DocKind::Setup {
+            continue;
+        }
+        if let Some(prev) = names.insert(parsed.spec.name.clone(), f.clone()) {
+            eprintln!(
+                "{}: experiment '{}' is also defined in {}; both would write {}",
+                f.display(),
+                parsed.spec.name,
+                prev.display(),
+                display(&a.out.join(&parsed.spec.name))
+            );
+            code = 1;
             continue;
         }
         match experiment::run::run_parsed(&parsed, &opts, &mut bar) {

@@ -1262,6 +1262,42 @@ impl P {
                 sweep.items.push(SweepItem::Axis(a));
             }
         }
+        // Repeated values would give two variants with the same id and inputs.
+        for item in &sweep.items {
+            let axes = item.axes();
+            let mut seen_vals: BTreeMap<String, usize> = BTreeMap::new();
+            for k in 0..item.len() {
+                let key: Vec<String> = axes
+                    .iter()
+                    .map(|a| apply::fmt_value(&a.values[k].0))
+                    .collect();
+                let key = key.join("\u{1f}");
+                if let Some(first) = seen_vals.insert(key, k) {
+                    let (v, vs) = &axes[0].values[k];
+                    let msg = if axes.len() > 1 {
+                        let combo: Vec<String> = axes
+                            .iter()
+                            .map(|a| apply::fmt_value(&a.values[k].0))
+                            .collect();
+                        format!(
+                            "repeated value combination ({}) in this zip (same as combination {})",
+                            combo.join(", "),
+                            first + 1
+                        )
+                    } else {
+                        format!(
+                            "repeated value {} in sweep axis '{}' (same as value {})",
+                            apply::fmt_value(v),
+                            axes[0].path,
+                            first + 1
+                        )
+                    };
+                    return Err(self
+                        .e(*vs, msg)
+                        .with_help("each value of an axis must differ; remove the repetition"));
+                }
+            }
+        }
         if sweep.items.is_empty() {
             return Err(self
                 .e(sp, "empty sweep")

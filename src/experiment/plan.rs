@@ -41,6 +41,7 @@ pub fn plan(parsed: &Parsed, seed: Option<u64>) -> Result<Plan, Located> {
     let mut variants = sweep::expand(&parsed.spec, &parsed.sweep, parsed.loader)
         .map_err(|(s, e)| parsed.sources.error(s, e.message).with_help_opt(e.help))?;
     let mut out = Vec::with_capacity(variants.len());
+    let mut file_digests = std::collections::BTreeMap::new();
     for v in variants.drain(..) {
         let mut v = v;
         if let Some(s) = seed {
@@ -54,7 +55,7 @@ pub fn plan(parsed: &Parsed, seed: Option<u64>) -> Result<Plan, Located> {
                     .with_help_opt(e.help)
             })?;
         }
-        let hash = input_hash(&v, parsed);
+        let hash = input_hash_cached(&v, parsed, &mut file_digests);
         out.push(PlannedVariant { variant: v, hash });
     }
     Ok(Plan {
@@ -71,6 +72,15 @@ pub fn plan(parsed: &Parsed, seed: Option<u64>) -> Result<Plan, Located> {
 /// another directory or checkout hashes the same), the id and swept values, and
 /// the *contents* of every referenced file.
 pub fn input_hash(v: &Variant, parsed: &Parsed) -> String {
+    input_hash_cached(v, parsed, &mut Default::default())
+}
+
+/// [`input_hash`] with a cache of file digests (each file is read once per plan).
+fn input_hash_cached(
+    v: &Variant,
+    parsed: &Parsed,
+    cache: &mut std::collections::BTreeMap<PathBuf, Vec<u8>>,
+) -> String {
     let mut h = Sha256::new();
     h.update(b"camsim ");
     h.update(crate::version().as_bytes());
@@ -82,13 +92,16 @@ pub fn input_hash(v: &Variant, parsed: &Parsed) -> String {
     h.update(v.id.as_bytes());
     h.update(serde_json::to_vec(&v.params).unwrap_or_default());
     for f in v.spec.referenced_files() {
-        match parsed.loader.read(&f) {
-            Ok(t) => h.update(Sha256::digest(t.as_bytes())),
-            Err(_) => match std::fs::read(&f) {
-                Ok(b) => h.update(Sha256::digest(&b)),
-                Err(_) => h.update(b"<missing>"),
-            },
-        }
+        let d = cache
+            .entry(f.clone())
+            .or_insert_with(|| match parsed.loader.read(&f) {
+                Ok(t) => Sha256::digest(t.as_bytes()).to_vec(),
+                Err(_) => match std::fs::read(&f) {
+                    Ok(b) => Sha256::digest(&b).to_vec(),
+                    Err(_) => b"<missing>".to_vec(),
+                },
+            });
+        h.update(&d[..]);
     }
     hex::encode(h.finalize())
 }
