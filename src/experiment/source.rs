@@ -305,3 +305,38 @@ pub fn skip_trivia(text: &str, mut offset: usize) -> usize {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tuples(s: &str) -> Vec<usize> {
+        find_tuples(s).into_iter().collect()
+    }
+
+    #[test]
+    fn tuples_are_found_only_in_value_position_outside_strings_and_comments() {
+        assert_eq!(tuples("a p=(0 1 -2.5e3)"), vec![4]);
+        assert_eq!(tuples("a (1 2) (3 4)\n"), vec![2, 8]);
+        assert_eq!(tuples("a \"(1 2)\" // (3 4)\n/* (5 6) */"), Vec::<usize>::new());
+        assert_eq!(tuples("a #\"(1 2)\"# (3)"), vec![12]);
+        assert_eq!(tuples("a \"\"\"\n(1 2)\n\"\"\" (7)"), vec![16]);
+        // type annotations and words are left to KDL
+        assert_eq!(tuples("a (u8)5 (1)2 (x y)"), Vec::<usize>::new());
+        assert_eq!(tuples("a (1 2"), Vec::<usize>::new());
+    }
+
+    #[test]
+    fn rewriting_keeps_every_offset() {
+        let s = "node p=(0 1 2) q=\"x\"";
+        let t = rewrite_tuples(s, &find_tuples(s));
+        assert_eq!(t, "node p=\"0 1 2\" q=\"x\"");
+        assert_eq!(t.len(), s.len());
+    }
+
+    #[test]
+    fn trivia_is_skipped() {
+        let s = "  /* c */ // x\n \\\n v";
+        assert_eq!(&s[skip_trivia(s, 0)..], "v");
+    }
+}
