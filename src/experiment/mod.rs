@@ -1,2 +1,34 @@
 //! The experiment language (KDL) → typed spec → sweep expansion → run plan,
 //! and the runner that drives every stage and writes results.
+//!
+//! - [`source`]: loading, the `(x y z)` tuple pre-pass, KDL errors → file:line:col
+//! - [`spec`]: the typed, resolved experiment (with source spans)
+//! - [`parse`]: KDL → spec, strictly, with diagnostics; `base` includes
+//! - [`apply`]: typed values and parameter paths (shared by parser and sweeps)
+//! - [`sweep`]: axes, zip groups, ranges, variant ids
+//! - [`plan`]: variants + input hashes, JSON
+//! - [`stages`]: scene → camera → render → sensor → measure (one function each)
+//! - [`run`]: the runner (resume, shards, interruption)
+//! - [`results`]: CSV, manifest, merge
+//! - [`hooks`]: validators the sensor/lens/measurement modules register
+//!
+//! The language reference is `docs/experiment-language.md`.
+
+pub mod apply;
+pub mod embedded;
+pub mod hooks;
+pub mod parse;
+pub mod plan;
+pub mod results;
+pub mod run;
+pub mod source;
+pub mod spec;
+pub mod stages;
+pub mod sweep;
+pub mod units;
+
+pub use parse::{DocKind, Parsed, parse_file, parse_source};
+pub use plan::{Plan, plan};
+pub use source::Loader;
+pub use spec::ResolvedExperiment;
+pub use sweep::Variant;

@@ -1,0 +1,119 @@
+//! Validator hooks: the sensor, lens and measurement modules own the names of
+//! their parameters; the experiment language only enforces the unit rule and
+//! the value types. Each module registers a [`SectionValidator`] here (the lead
+//! wires them in [`install_defaults`]), and `camsim check` / `plan` call it on
+//! the resolved section of every variant, so a misspelt sensor property is an
+//! error with `file:line:col` before anything runs.
+//!
+//! Section keys: `"sensor"`, `"lens"`, `"measure:<kind>"` (e.g. `"measure:sfr"`),
+//! `"add:<target>"` (e.g. `"add:slanted-edge"`), `"override"`.
+
+use crate::params::Params;
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::sync::RwLock;
+
+/// What a validator reports: the offending property (None = the whole
+/// section), what is wrong and what is expected, and an optional suggestion.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ParamError {
+    pub name: Option<String>,
+    pub message: String,
+    pub help: Option<String>,
+}
+
+impl ParamError {
+    pub fn new(name: Option<&str>, message: impl Into<String>) -> Self {
+        Self {
+            name: name.map(str::to_string),
+            message: message.into(),
+            help: None,
+        }
+    }
+    pub fn with_help(mut self, h: impl Into<String>) -> Self {
+        self.help = Some(h.into());
+        self
+    }
+    /// Unknown name `name` among `known`, with a did-you-mean suggestion.
+    pub fn unknown(name: &str, known: &[&str]) -> Self {
+        let mut e = Self::new(
+            Some(name),
+            format!(
+                "unknown property '{name}'; expected one of: {}",
+                known.join(", ")
+            ),
+        );
+        e.help = crate::diag::did_you_mean(name, known.iter().copied())
+            .map(|s| format!("did you mean '{s}'?"));
+        e
+    }
+}
+
+/// Validates one section: `file` is the referenced definition file (if any),
+/// `params` the inline overrides / properties. Must not panic.
+pub type SectionValidator = fn(file: Option<&Path>, params: &Params) -> Result<(), ParamError>;
+
+static REGISTRY: RwLock<BTreeMap<String, SectionValidator>> = RwLock::new(BTreeMap::new());
+
+/// Register (or replace) the validator of a section key.
+pub fn register(section: &str, f: SectionValidator) {
+    if let Ok(mut r) = REGISTRY.write() {
+        r.insert(section.to_string(), f);
+    }
+}
+
+/// The validator of a section key, if one is registered.
+pub fn validator(section: &str) -> Option<SectionValidator> {
+    REGISTRY
+        .read()
+        .ok()
+        .and_then(|r| r.get(section).copied())
+        .or_else(|| builtin(section))
+}
+
+/// Validators that are always present (unless replaced through [`register`]).
+fn builtin(section: &str) -> Option<SectionValidator> {
+    match section {
+        "measure:colorimetry" => Some(validate_colorimetry),
+        _ => None,
+    }
+}
+
+/// Validators camsim ships. Called by the CLI before parsing. The lead adds the
+/// sensor/lens/measurement validators here as those modules land, e.g.
+/// `register("sensor", crate::sensor::validate_overrides)`.
+pub fn install_defaults() {
+    // register("sensor", crate::sensor::validate_overrides);
+    // register("lens", crate::optics::validate_overrides);
+}
+
+/// `measure "colorimetry" spectrum="cie-d65" [wavelength-nm=(380 780 5)]`.
+pub fn validate_colorimetry(_file: Option<&Path>, p: &Params) -> Result<(), ParamError> {
+    const KNOWN: &[&str] = &["spectrum", "wavelength-nm"];
+    if let Some(u) = p.unknown(KNOWN).first() {
+        return Err(ParamError::unknown(u, KNOWN));
+    }
+    match p.get("spectrum") {
+        None => Err(ParamError::new(
+            None,
+            "colorimetry needs spectrum=\"<name>\" (e.g. spectrum=\"cie-d65\")",
+        )),
+        Some(crate::params::Value::String(s)) => {
+            if s.contains('#') {
+                return Ok(()); // a CSV column; read (and checked) when the variant runs
+            }
+            crate::spectrum::library::named(s).map(|_| ()).map_err(|e| {
+                let mut err = ParamError::new(Some("spectrum"), e.clone());
+                if let Some(i) = e.find("(did you mean") {
+                    err.help = Some(e[i + 1..e.len() - 1].to_string());
+                    err.message = e[..i].trim().to_string();
+                }
+                err
+            })
+        }
+        Some(v) => Err(ParamError::new(
+            Some("spectrum"),
+            format!("spectrum: expected a string, found {v}"),
+        )),
+    }
+}

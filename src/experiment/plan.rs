@@ -1,0 +1,157 @@
+//! The run plan: every variant of an experiment with its resolved parameters
+//! and input hash. `camsim plan --json` prints it; the same inputs always give
+//! byte-identical JSON (ordered maps, no timestamps).
+
+use super::parse::{Parsed, validate_hooks};
+use super::sweep::{self, Variant};
+use crate::diag::Located;
+use serde::Serialize;
+use sha2::{Digest, Sha256};
+use std::path::PathBuf;
+
+/// A planned variant: the variant plus the hash of all its inputs.
+#[derive(Clone, Debug, Serialize)]
+pub struct PlannedVariant {
+    #[serde(flatten)]
+    pub variant: Variant,
+    /// SHA-256 (hex) over camsim's version, the resolved spec, the id, the swept
+    /// values and the contents of every referenced file.
+    pub hash: String,
+}
+
+impl PlannedVariant {
+    /// Short hash used to name the per-variant results file.
+    pub fn short_hash(&self) -> &str {
+        &self.hash[..16]
+    }
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Plan {
+    pub experiment: String,
+    pub file: PathBuf,
+    pub camsim_version: String,
+    /// Swept parameter paths in file order (the results' parameter columns).
+    pub axes: Vec<String>,
+    pub variants: Vec<PlannedVariant>,
+}
+
+/// Expand and check every variant. `seed` replaces `render.seed` everywhere.
+pub fn plan(parsed: &Parsed, seed: Option<u64>) -> Result<Plan, Located> {
+    let mut variants = sweep::expand(&parsed.spec, &parsed.sweep, parsed.loader)
+        .map_err(|(s, e)| parsed.sources.error(s, e.message).with_help_opt(e.help))?;
+    let mut out = Vec::with_capacity(variants.len());
+    let mut file_digests = std::collections::BTreeMap::new();
+    for v in variants.drain(..) {
+        let mut v = v;
+        if let Some(s) = seed {
+            v.spec.render.seed = s;
+        }
+        if !parsed.sweep.items.is_empty() {
+            validate_hooks(&v.spec).map_err(|(s, e)| {
+                parsed
+                    .sources
+                    .error(s, format!("variant '{}': {}", v.id, e.message))
+                    .with_help_opt(e.help)
+            })?;
+        }
+        let hash = input_hash_cached(&v, parsed, &mut file_digests);
+        out.push(PlannedVariant { variant: v, hash });
+    }
+    Ok(Plan {
+        experiment: parsed.spec.name.clone(),
+        file: parsed.spec.file.clone(),
+        camsim_version: crate::version().to_string(),
+        axes: parsed.sweep.paths(),
+        variants: out,
+    })
+}
+
+/// Hash of everything a variant's results depend on: camsim's version, the
+/// resolved spec (without file-system paths, so the same experiment run from
+/// another directory or checkout hashes the same), the id and swept values, and
+/// the *contents* of every referenced file.
+pub fn input_hash(v: &Variant, parsed: &Parsed) -> String {
+    input_hash_cached(v, parsed, &mut Default::default())
+}
+
+/// [`input_hash`] with a cache of file digests (each file is read once per plan).
+fn input_hash_cached(
+    v: &Variant,
+    parsed: &Parsed,
+    cache: &mut std::collections::BTreeMap<PathBuf, Vec<u8>>,
+) -> String {
+    let mut h = Sha256::new();
+    h.update(b"camsim ");
+    h.update(crate::version().as_bytes());
+    h.update(b"\n");
+    let mut spec = serde_json::to_value(&v.spec).unwrap_or_default();
+    strip_paths(&mut spec, true);
+    h.update(serde_json::to_vec(&spec).unwrap_or_default());
+    h.update(b"\n");
+    h.update(v.id.as_bytes());
+    h.update(serde_json::to_vec(&v.params).unwrap_or_default());
+    for f in v.spec.referenced_files() {
+        let d = cache
+            .entry(f.clone())
+            .or_insert_with(|| match parsed.loader.read(&f) {
+                Ok(t) => Sha256::digest(t.as_bytes()).to_vec(),
+                Err(_) => match std::fs::read(&f) {
+                    Ok(b) => Sha256::digest(&b).to_vec(),
+                    Err(_) => b"<missing>".to_vec(),
+                },
+            });
+        h.update(&d[..]);
+    }
+    hex::encode(h.finalize())
+}
+
+/// Remove resolved paths: the experiment's `file` and `bases` (top level) and
+/// the `path` of every file reference (which keeps its `written` form).
+fn strip_paths(v: &mut serde_json::Value, top: bool) {
+    match v {
+        serde_json::Value::Object(m) => {
+            if top {
+                m.remove("file");
+                m.remove("bases");
+            }
+            if m.contains_key("written") {
+                m.remove("path");
+            }
+            for x in m.values_mut() {
+                strip_paths(x, false);
+            }
+        }
+        serde_json::Value::Array(a) => a.iter_mut().for_each(|x| strip_paths(x, false)),
+        _ => {}
+    }
+}
+
+impl Plan {
+    /// Canonical JSON (pretty, ordered) with a trailing newline.
+    pub fn to_json(&self) -> String {
+        let mut s = serde_json::to_string_pretty(self)
+            .unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"));
+        s.push('\n');
+        s
+    }
+    /// A human-readable table: one line per variant.
+    pub fn to_table(&self) -> String {
+        let mut s = format!(
+            "# {} ({} variants) from {}\n",
+            self.experiment,
+            self.variants.len(),
+            self.file.display()
+        );
+        s.push_str("index\thash\tid\n");
+        for v in &self.variants {
+            s.push_str(&format!(
+                "{}\t{}\t{}\n",
+                v.variant.index,
+                v.short_hash(),
+                v.variant.id
+            ));
+        }
+        s
+    }
+}

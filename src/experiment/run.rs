@@ -1,0 +1,239 @@
+//! The runner: for each planned variant of this shard, skip it when its
+//! results exist (same input hash), else run scene → camera → render → sensor
+//! → measure through [`super::stages`], write its rows atomically, and go on;
+//! a failing variant is reported and the run continues (exit 1 at the end).
+//!
+//! Sharding: `--shard i/n` (1-based) runs the variants whose plan index `k`
+//! satisfies `k mod n = i − 1` (round-robin, so each shard gets a similar mix
+//! of cheap and expensive variants of a sweep).
+//!
+//! Interruption: Ctrl-C (SIGINT) lets the variant in flight finish, then stops
+//! and writes the manifest and partial results. `CAMSIM_TEST_ABORT_AFTER=N`
+//! (testing only) aborts the process like `kill -9` right after the N-th
+//! variant of this process has been written; `CAMSIM_TEST_INTERRUPT_AFTER=N`
+//! behaves as if Ctrl-C were pressed at that moment.
+
+use super::parse::Parsed;
+use super::plan::{Plan, PlannedVariant};
+use super::results::{ExperimentDir, Manifest, variant_csv};
+use super::stages;
+use crate::figure::Figure;
+use crate::{Error, Result};
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::time::Instant;
+
+/// Options of a run.
+#[derive(Clone, Debug)]
+pub struct RunOptions {
+    pub out: PathBuf,
+    pub threads: usize,
+    pub seed: Option<u64>,
+    /// (i, n), 1-based i.
+    pub shard: Option<(usize, usize)>,
+    /// Set by a Ctrl-C handler: stop after the variant in flight.
+    pub interrupted: Arc<AtomicBool>,
+}
+
+/// What happened to one variant.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Outcome {
+    Done { figures: usize, total_s: f64 },
+    Cached,
+    Failed(String),
+}
+
+/// Receives progress events.
+pub trait Progress {
+    fn start(&mut self, experiment: &str, variants: usize);
+    fn variant(&mut self, experiment: &str, id: &str, outcome: &Outcome);
+    fn finish(&mut self, experiment: &str);
+}
+
+/// Counts of one experiment's run.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Summary {
+    pub done: usize,
+    pub cached: usize,
+    pub failed: usize,
+    /// Variants of other shards or not reached after an interrupt.
+    pub not_run: usize,
+    pub interrupted: bool,
+}
+
+/// Parse `i/n` (1 ≤ i ≤ n).
+pub fn parse_shard(s: &str) -> Result<(usize, usize)> {
+    let bad = || {
+        Error::invalid(format!(
+            "--shard '{s}': expected i/n with 1 ≤ i ≤ n, e.g. --shard 2/8"
+        ))
+    };
+    let (a, b) = s.split_once('/').ok_or_else(bad)?;
+    let i: usize = a.trim().parse().map_err(|_| bad())?;
+    let n: usize = b.trim().parse().map_err(|_| bad())?;
+    if i == 0 || n == 0 || i > n {
+        return Err(bad());
+    }
+    Ok((i, n))
+}
+
+/// Is plan index `k` in shard (i, n)?
+pub fn in_shard(k: usize, shard: Option<(usize, usize)>) -> bool {
+    shard.is_none_or(|(i, n)| k % n == i - 1)
+}
+
+static FINISHED_IN_PROCESS: AtomicUsize = AtomicUsize::new(0);
+
+/// Run the figures of one variant.
+pub fn run_variant(v: &PlannedVariant) -> Result<(Vec<Figure>, f64)> {
+    let spec = &v.variant.spec;
+    let need = spec.measures.iter().fold(stages::Needs::default(), |a, m| {
+        let n = stages::needs(&m.kind);
+        stages::Needs {
+            optical_image: a.optical_image || n.optical_image || n.sensor_image,
+            sensor_image: a.sensor_image || n.sensor_image,
+        }
+    });
+    let mut render_s = 0.0;
+    let mut oi = None;
+    let mut si = None;
+    if need.optical_image {
+        let scene = stages::build_scene(spec)?;
+        let camera = stages::build_camera(spec, &scene)?;
+        let t = Instant::now();
+        oi = Some(stages::render(spec, &scene, camera.as_ref())?);
+        render_s = t.elapsed().as_secs_f64();
+    }
+    if need.sensor_image
+        && let Some(o) = &oi
+    {
+        si = Some(stages::simulate_sensor(spec, o)?);
+    }
+    let mut figures = Vec::new();
+    for m in &spec.measures {
+        for f in stages::measure(m, spec, oi.as_ref(), si.as_ref())? {
+            if !f.value.is_finite() || !f.stderr.is_finite() {
+                return Err(Error::invalid(format!(
+                    "measurement '{}' produced a non-finite {} ({} ± {}); not written",
+                    m.name, f.quantity, f.value, f.stderr
+                )));
+            }
+            figures.push(f);
+        }
+    }
+    Ok((figures, render_s))
+}
+
+/// Run one planned experiment.
+pub fn run_plan(plan: &Plan, opts: &RunOptions, progress: &mut dyn Progress) -> Result<Summary> {
+    let t0 = Instant::now();
+    let dir = ExperimentDir::new(&opts.out, &plan.experiment);
+    std::fs::create_dir_all(dir.root.join("variants")).map_err(|e| Error::io(&dir.root, e))?;
+    let mut manifest = Manifest::new(plan, opts.threads, opts.shard);
+    let mut sum = Summary::default();
+    let mine: Vec<&PlannedVariant> = plan
+        .variants
+        .iter()
+        .filter(|v| in_shard(v.variant.index, opts.shard))
+        .collect();
+    progress.start(&plan.experiment, mine.len());
+    let abort_after: Option<usize> = std::env::var("CAMSIM_TEST_ABORT_AFTER")
+        .ok()
+        .and_then(|s| s.parse().ok());
+    let interrupt_after: Option<usize> = std::env::var("CAMSIM_TEST_INTERRUPT_AFTER")
+        .ok()
+        .and_then(|s| s.parse().ok());
+    for v in &mine {
+        if opts.interrupted.load(Ordering::SeqCst) {
+            sum.interrupted = true;
+            break;
+        }
+        let rec = &mut manifest.variants[v.variant.index];
+        let outcome = if dir.has_variant(v.short_hash(), &plan.axes) {
+            rec.status = "cached".into();
+            sum.cached += 1;
+            Outcome::Cached
+        } else {
+            let t = Instant::now();
+            match run_variant(v) {
+                Ok((figs, render_s)) => {
+                    let total_s = t.elapsed().as_secs_f64();
+                    let csv = variant_csv(
+                        &plan.experiment,
+                        &v.variant.id,
+                        &plan.axes,
+                        &v.variant.params,
+                        &figs,
+                        render_s,
+                        total_s,
+                    );
+                    crate::diag::write_atomic(&dir.variant_file(v.short_hash()), csv.as_bytes())?;
+                    rec.status = "done".into();
+                    rec.render_s = Some(render_s);
+                    rec.total_s = Some(total_s);
+                    sum.done += 1;
+                    let n = FINISHED_IN_PROCESS.fetch_add(1, Ordering::SeqCst) + 1;
+                    if abort_after.is_some_and(|k| n >= k) {
+                        std::process::abort();
+                    }
+                    if interrupt_after.is_some_and(|k| n >= k) {
+                        opts.interrupted.store(true, Ordering::SeqCst);
+                    }
+                    Outcome::Done {
+                        figures: figs.len(),
+                        total_s,
+                    }
+                }
+                Err(e) => {
+                    rec.status = "failed".into();
+                    rec.error = Some(e.to_string());
+                    sum.failed += 1;
+                    Outcome::Failed(e.to_string())
+                }
+            }
+        };
+        progress.variant(&plan.experiment, &v.variant.id, &outcome);
+    }
+    sum.not_run = plan.variants.len() - sum.done - sum.cached - sum.failed;
+    manifest.wall_s = t0.elapsed().as_secs_f64();
+    let all: Vec<&str> = plan.variants.iter().map(|v| v.short_hash()).collect();
+    let (csv, missing) = dir.assemble(&plan.axes, &all)?;
+    manifest.complete = missing == 0;
+    // Variants of other shards that already have results (shared output directory).
+    for (rec, v) in manifest.variants.iter_mut().zip(&plan.variants) {
+        if rec.status == "not-run"
+            && !in_shard(v.variant.index, opts.shard)
+            && dir.has_variant(v.short_hash(), &plan.axes)
+        {
+            rec.status = "cached".into();
+        }
+    }
+    match opts.shard {
+        Some((i, n)) => {
+            manifest.write(&dir.shard_manifest(i, n))?;
+            if missing == 0 {
+                crate::diag::write_atomic(&dir.results(), csv.as_bytes())?;
+                let mut full = manifest.clone();
+                full.shard = None;
+                full.write(&dir.manifest())?;
+            }
+        }
+        None => {
+            crate::diag::write_atomic(&dir.results(), csv.as_bytes())?;
+            manifest.write(&dir.manifest())?;
+        }
+    }
+    progress.finish(&plan.experiment);
+    Ok(sum)
+}
+
+/// Plan and run a parsed experiment.
+pub fn run_parsed(
+    parsed: &Parsed,
+    opts: &RunOptions,
+    progress: &mut dyn Progress,
+) -> Result<Summary> {
+    let plan = super::plan::plan(parsed, opts.seed)?;
+    run_plan(&plan, opts, progress)
+}

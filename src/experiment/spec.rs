@@ -1,0 +1,209 @@
+//! The typed experiment: what a parsed and resolved KDL file means.
+//!
+//! Every part keeps the [`Span`] it came from (skipped when serialising), so a
+//! later check — a sweep value, a validator hook, a missing file — can still
+//! point at `file:line:col`. The serialised form (JSON) is what `camsim plan
+//! --json` prints and what the run's input hash is computed from, so
+//! reformatting a file or editing comments never invalidates results.
+
+use super::source::Span;
+use crate::params::{Params, Value};
+use crate::spectrum::WavelengthGrid;
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+/// A reference to a file as written, and as resolved against the referring file's directory.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct FileRef {
+    pub written: String,
+    pub path: PathBuf,
+    #[serde(skip)]
+    pub span: Span,
+}
+
+/// Kinds of object an experiment can add to a scene.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Target {
+    /// Macbeth ColorChecker chart (24 patches; labels per patch).
+    Mcc,
+    /// ISO 12233 slanted-edge target.
+    SlantedEdge,
+    /// A mesh file (`file="scenes/bunny.obj"`).
+    Mesh,
+}
+
+impl Target {
+    pub const NAMES: &'static [&'static str] = &["mcc", "slanted-edge", "mesh"];
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "mcc" => Some(Self::Mcc),
+            "slanted-edge" => Some(Self::SlantedEdge),
+            "mesh" => Some(Self::Mesh),
+            _ => None,
+        }
+    }
+}
+
+/// An object added to the scene (`add "edge-near" target="slanted-edge" …`).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Addition {
+    pub id: String,
+    pub target: Target,
+    /// Mesh file (required for `target="mesh"`).
+    pub file: Option<FileRef>,
+    pub position_m: [f64; 3],
+    /// Rotation about x, then y, then z, in degrees.
+    pub rotate_deg: [f64; 3],
+    /// Scale factors (a single `scale=` number applies to all three axes).
+    pub scale: [f64; 3],
+    /// Further target-specific properties (e.g. `tilt-deg`, `size-m`, `reflectance`).
+    pub params: Params,
+    #[serde(skip)]
+    pub span: Span,
+    #[serde(skip)]
+    pub param_spans: BTreeMap<String, Span>,
+}
+
+/// Changes to an object of the base scene (`override "wall-left" reflectance="cbox-red-wall"`).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Override {
+    pub object: String,
+    pub params: Params,
+    #[serde(skip)]
+    pub span: Span,
+    #[serde(skip)]
+    pub param_spans: BTreeMap<String, Span>,
+}
+
+/// Camera pose in scene coordinates (metres).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct CameraSection {
+    pub position_m: [f64; 3],
+    pub look_at_m: [f64; 3],
+    pub up: [f64; 3],
+    #[serde(skip)]
+    pub span: Span,
+}
+
+/// A lens or sensor: an optional definition file plus inline overrides.
+/// The names inside `overrides` belong to the optics / sensor modules, which
+/// validate them through a [`super::hooks`] validator.
+#[derive(Clone, Debug, PartialEq, Serialize, Default)]
+pub struct ConfigSection {
+    pub file: Option<FileRef>,
+    pub overrides: Params,
+    #[serde(skip)]
+    pub span: Span,
+    #[serde(skip)]
+    pub param_spans: BTreeMap<String, Span>,
+}
+
+/// Render settings.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RenderSettings {
+    /// Samples per pixel (≥ 1).
+    pub spp: u64,
+    /// Maximum path length in bounces (0 = emitters seen directly only).
+    pub max_bounces: u32,
+    /// Random seed of the variant (`--seed` replaces it for every variant).
+    pub seed: u64,
+    /// Wavelength grid `wavelength-nm=(start stop step)`.
+    pub wavelength: WavelengthGrid,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        Self {
+            spp: 64,
+            max_bounces: 5,
+            seed: 0,
+            wavelength: WavelengthGrid::default(),
+        }
+    }
+}
+
+/// One requested measurement.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Measure {
+    /// Name used in results (`name=`; defaults to the kind).
+    pub name: String,
+    /// Kind: `colorimetry`, `sfr`, `ri`, `noise`, `profile`, `mcc`, `compare`, `convergence`.
+    pub kind: String,
+    /// Objects measured (`of="edge-near"` and/or further arguments).
+    pub of: Vec<String>,
+    pub params: Params,
+    #[serde(skip)]
+    pub span: Span,
+    #[serde(skip)]
+    pub param_spans: BTreeMap<String, Span>,
+}
+
+/// Known measurement kinds.
+pub const MEASURE_KINDS: &[&str] = &[
+    "colorimetry",
+    "sfr",
+    "ri",
+    "noise",
+    "profile",
+    "mcc",
+    "compare",
+    "convergence",
+];
+
+/// An experiment with its base setups merged in, before sweeps are applied.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ResolvedExperiment {
+    pub name: String,
+    /// The experiment file.
+    pub file: PathBuf,
+    pub description: Option<String>,
+    /// Base setups included, outermost first.
+    pub bases: Vec<PathBuf>,
+    pub scene: Option<FileRef>,
+    pub additions: Vec<Addition>,
+    pub removals: Vec<String>,
+    pub overrides: Vec<Override>,
+    pub camera: Option<CameraSection>,
+    pub lens: Option<ConfigSection>,
+    pub sensor: Option<ConfigSection>,
+    pub render: RenderSettings,
+    pub measures: Vec<Measure>,
+    /// Values of label-only sweep axes (`tag.<name>`), for ids and results.
+    pub tags: BTreeMap<String, Value>,
+}
+
+impl ResolvedExperiment {
+    /// Files whose contents are inputs of a variant (hashed for resume).
+    pub fn referenced_files(&self) -> Vec<PathBuf> {
+        let mut v = Vec::new();
+        if let Some(s) = &self.scene {
+            v.push(s.path.clone());
+        }
+        for a in &self.additions {
+            if let Some(f) = &a.file {
+                v.push(f.path.clone());
+            }
+        }
+        for s in [&self.lens, &self.sensor].into_iter().flatten() {
+            if let Some(f) = &s.file {
+                v.push(f.path.clone());
+            }
+        }
+        v.extend(self.bases.iter().cloned());
+        // Spectra read from CSV files (`spectrum="data.csv#column"`).
+        let dir = self.file.parent().unwrap_or(std::path::Path::new(""));
+        for m in &self.measures {
+            for val in m.params.0.values() {
+                if let Value::String(s) = val
+                    && let Some((file, _)) = s.split_once('#')
+                    && file.ends_with(".csv")
+                {
+                    v.push(dir.join(file));
+                }
+            }
+        }
+        v
+    }
+}
