@@ -18,10 +18,12 @@
 // `!(x > 0.0)` is deliberate throughout: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod bench;
 pub mod bsdf;
 pub mod film;
 pub mod geometry;
 pub mod integrator;
+pub mod output;
 pub mod sampling;
 pub mod world;
 

@@ -72,7 +72,7 @@ fn finish(
             continue;
         }
         let area2 = (p[1] - p[0]).cross(p[2] - p[0]).length();
-        if !(area2 > 0.0) || !area2.is_finite() {
+        if area2.is_nan() || area2 <= 0.0 || !area2.is_finite() {
             degenerate += 1;
             continue;
         }
