@@ -160,6 +160,17 @@ pub fn mitsuba_cornell_box() -> (Scene, FilmSpec) {
     (s, film)
 }
 
+/// Process CPU time (user + system) in seconds, from /proc (Linux); None elsewhere.
+fn cpu_time_s() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the command name (which is in parentheses): utime is field 14, stime 15.
+    let rest = &s[s.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ut: f64 = f.get(11)?.parse().ok()?;
+    let st: f64 = f.get(12)?.parse().ok()?;
+    Some((ut + st) / 100.0) // USER_HZ is 100 on Linux
+}
+
 /// Run the benchmark and return a printable report.
 pub fn run(spp: u32, ref_spp: u32, threads: usize) -> Result<String> {
     let (scene, film) = mitsuba_cornell_box();
@@ -184,12 +195,16 @@ pub fn run(spp: u32, ref_spp: u32, threads: usize) -> Result<String> {
     let mut timed = None;
     for kind in [BvhKind::Bvh2, BvhKind::Cwbvh] {
         let world = World::build(&scene, &settings.grid, kind)?;
+        let cpu0 = cpu_time_s();
         let img = render_world(&world, &cam, &to_world, &film, &settings, names.clone())?;
+        let cpu = cpu_time_s().zip(cpu0).map(|(b, a)| b - a).unwrap_or(f64::NAN);
         let paths = film.width_px as f64 * film.height_px as f64 * spp as f64;
         out += &format!(
-            "  {kind:?}: {spp} spp in {:.3} s = {:.3} M paths/s ({} non-finite)\n",
+            "  {kind:?}: {spp} spp in {:.3} s = {:.3} M paths/s wall; {:.2} CPU s = {:.3} M paths per CPU-second ({} non-finite)\n",
             img.render_s,
             paths / img.render_s / 1e6,
+            cpu,
+            paths / cpu / 1e6,
             img.nan_count
         );
         if kind == BvhKind::Bvh2 {
