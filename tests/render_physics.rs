@@ -502,7 +502,7 @@ fn lambertian_floor_under_uniform_sky_and_point_light() {
     // Then the same floor (sky removed) under a point light of intensity I at
     // height h: E = I/h² straight below, radiance ρI/(πh²).
     let (rho, l_sky, i_pt, h) = (0.6, 0.8, 0.05, 0.4);
-    for case in ["sky", "point"] {
+    for case in ["sky", "point", "spot", "distant"] {
         let mut scene = Scene::default();
         let m = scene.material(
             "floor",
@@ -524,6 +524,24 @@ fn lambertian_floor_under_uniform_sky_and_point_light() {
                 radiance: constant(l_sky),
             });
             rho * l_sky
+        } else if case == "spot" {
+            // Straight below the spot, well inside its 30° cone: like the point light.
+            scene.lights.push(camsim::scene::Light::Spot {
+                position: DVec3::new(0.0, h, 0.0),
+                direction: -DVec3::Y,
+                cone_angle_deg: 30.0,
+                falloff_start_deg: 25.0,
+                intensity: constant(i_pt),
+            });
+            rho * i_pt / (PI * h * h)
+        } else if case == "distant" {
+            // Irradiance E⊥ arriving at 60° from the normal: E = E⊥·cos 60°.
+            let dir = DVec3::new(0.0, -0.5, 3f64.sqrt() / 2.0);
+            scene.lights.push(camsim::scene::Light::Distant {
+                direction: dir,
+                irradiance: constant(l_sky),
+            });
+            rho * l_sky * 0.5 / PI
         } else {
             scene.lights.push(camsim::scene::Light::Point {
                 position: DVec3::new(0.0, h, 0.0),
@@ -610,4 +628,60 @@ fn dispersive_glass_in_a_white_furnace_conserves_energy() {
     eprintln!("dispersive furnace: band-mean L = {all:.5} (expected 1)");
     // Band average: stderr ≈ 0.5 %; 2 % tolerance.
     assert!((all - 1.0).abs() < 0.02, "band-mean L = {all}");
+}
+
+/// A pinhole that claims to be dispersive: forces hero-wavelength camera sampling.
+struct DispersivePinhole(Pinhole);
+impl Camera for DispersivePinhole {
+    fn sample_ray(&self, f: DVec2, u: DVec2, l: f64) -> Option<camsim::optics::CameraRay> {
+        self.0.sample_ray(f, u, l)
+    }
+    fn is_dispersive(&self) -> bool {
+        true
+    }
+    fn describe(&self) -> String {
+        "dispersive test pinhole".into()
+    }
+}
+
+#[test]
+fn hero_wavelength_camera_is_unbiased_in_the_furnace() {
+    let mut scene = Scene::default();
+    let m = scene.material(
+        "wall",
+        Material::Diffuse {
+            reflectance: constant(0.5),
+        },
+    );
+    let o = scene.object("enclosure");
+    scene.meshes.push(cuboid(
+        DVec3::splat(1.0),
+        DMat4::IDENTITY,
+        true,
+        m,
+        o,
+        Some(Emission {
+            radiance: constant(1.0),
+            two_sided: false,
+        }),
+    ));
+    with_camera(&mut scene, DVec3::ZERO, DVec3::Z, 20.0, 1.0);
+    let film = FilmSpec {
+        width_px: 8,
+        height_px: 8,
+        pixel_pitch_m: 1e-5,
+        crop_window: None,
+    };
+    let cam = DispersivePinhole(Pinhole::new(20.0, 1.0, &film).unwrap());
+    let img = render(&scene, &cam, &film, &settings(1024, 200)).unwrap();
+    assert_all_finite(&img);
+    let mut mean = 0.0;
+    for b in 0..img.bands() {
+        let (l, _) = mean_over_weight(&img, &cam.0, &film, b);
+        mean += l / img.bands() as f64;
+        // One band per path: ~2.1k effective paths per band, ≈ 2 % stderr; 10 % > 4σ.
+        assert!((l / 2.0 - 1.0).abs() < 0.1, "band {b}: L = {l}");
+    }
+    eprintln!("hero camera furnace: band-mean L/Le = {mean:.5} (expected 2)");
+    assert!((mean / 2.0 - 1.0).abs() < 0.02, "band-mean L/Le = {mean}");
 }
