@@ -1,3 +1,8 @@
+use camsim::optical_image::Rect;
+use camsim::optics::pinhole::camera_from_spec;
+use camsim::render::{RenderSettings, output};
+use camsim::scene::FilmSpec;
+use camsim::scene::kdl_scene::load_kdl_scene;
 use camsim::{Error, Result};
 use clap::Args;
 use std::path::PathBuf;
@@ -23,11 +28,114 @@ pub struct RenderArgs {
 pub struct BenchArgs {
     /// Which benchmark: render, parse, sensor.
     pub which: String,
+    /// Samples per pixel of the timed render.
+    #[arg(long, default_value_t = 16)]
+    pub spp: u32,
+    /// Samples per pixel of the reference render (for RMSE).
+    #[arg(long, default_value_t = 256)]
+    pub ref_spp: u32,
+    #[arg(long, default_value_t = 2)]
+    pub threads: usize,
 }
 
-pub fn render(_a: RenderArgs) -> Result<i32> {
-    Err(Error::NotSupported("render".into()))
+fn parse_roi(s: &str) -> Result<Rect> {
+    let v: Vec<&str> = s.split(',').map(str::trim).collect();
+    let bad = || Error::invalid(format!("--roi '{s}': expected x,y,w,h (whole pixels)"));
+    if v.len() != 4 {
+        return Err(bad());
+    }
+    let n: Vec<u32> = v
+        .iter()
+        .map(|x| x.parse::<u32>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| bad())?;
+    Ok(Rect::new(n[0], n[1], n[2], n[3]))
 }
-pub fn bench(_a: BenchArgs) -> Result<i32> {
-    Err(Error::NotSupported("bench".into()))
+
+pub fn render(a: RenderArgs) -> Result<i32> {
+    let ext = a
+        .scene
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    if ext == "pbrt" {
+        return Err(Error::NotSupported(format!(
+            "{}: pbrt scenes (the pbrt parser is a separate issue); use a .kdl scene",
+            a.scene.display()
+        )));
+    }
+    if ext != "kdl" {
+        return Err(Error::invalid(format!(
+            "{}: unknown scene format (expected .kdl or .pbrt)",
+            a.scene.display()
+        )));
+    }
+    let sf = load_kdl_scene(&a.scene)?;
+    for w in &sf.scene.warnings {
+        eprintln!("warning: {w}");
+    }
+    let film: FilmSpec = sf.scene.film.clone().unwrap_or_default();
+    let spec =
+        sf.scene.camera.as_ref().ok_or_else(|| {
+            Error::invalid(format!("{}: the scene has no camera", a.scene.display()))
+        })?;
+    let camera = camera_from_spec(spec, &film)?;
+    let settings = RenderSettings {
+        spp: a.spp.or(sf.spp).unwrap_or(64),
+        max_bounces: sf.max_bounces.unwrap_or(6),
+        seed: a.seed.unwrap_or(0),
+        threads: a.threads.unwrap_or(0),
+        roi: a.roi.as_deref().map(parse_roi).transpose()?,
+        ..Default::default()
+    };
+    let img = camsim::render::render(&sf.scene, camera.as_ref(), &film, &settings)?;
+    let paths = img.window.area() as f64 * settings.spp as f64;
+    output::write_exr(&a.out, &img)?;
+    let png = a.out.with_extension("png");
+    output::write_png_preview(&png, &img)?;
+    let json = a.out.with_extension("json");
+    let side = serde_json::json!({
+        "scene": a.scene.display().to_string(),
+        "camera": camera.describe(),
+        "film": { "width_px": film.width_px, "height_px": film.height_px, "pixel_pitch_m": film.pixel_pitch_m },
+        "window": img.window,
+        "spp": img.spp,
+        "render_s": img.render_s,
+        "paths": paths,
+        "paths_per_s": paths / img.render_s.max(1e-9),
+        "nan_count": img.nan_count,
+        "settings": settings,
+        "units": "irradiance W/(m²·nm)",
+        "labels": img.label_names,
+        "warnings": sf.scene.warnings,
+    });
+    output::write_sidecar(&json, &side)?;
+    println!(
+        "{}: {}×{} px, {} spp, {:.2} s, {:.3} M paths/s, {} non-finite samples dropped → {}, {}, {}",
+        a.scene.display(),
+        img.width(),
+        img.height(),
+        img.spp,
+        img.render_s,
+        paths / img.render_s.max(1e-9) / 1e6,
+        img.nan_count,
+        a.out.display(),
+        png.display(),
+        json.display()
+    );
+    Ok(0)
+}
+
+pub fn bench(a: BenchArgs) -> Result<i32> {
+    match a.which.as_str() {
+        "render" => {
+            let r = camsim::render::bench::run(a.spp, a.ref_spp, a.threads)?;
+            println!("{r}");
+            Ok(0)
+        }
+        other => Err(Error::NotSupported(format!(
+            "bench '{other}' (available here: render)"
+        ))),
+    }
 }

@@ -12,6 +12,8 @@
 //!   E(film_m) = E[weight · L(ray)], in W/(m²·nm) for L in W/(sr·m²·nm).
 //!   For an ideal lens of f-number N this gives E = πL/(4N²)·cos⁴θ.
 
+pub mod pinhole;
+
 use glam::{DVec2, DVec3};
 
 /// A ray leaving the optics into the scene, in camera space.

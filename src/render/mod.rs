@@ -1,1 +1,87 @@
 //! The spectral path tracer: BVH, materials, lights, integrator, film.
+//!
+//! `render(scene, camera, film, settings)` returns the spectral irradiance at
+//! the sensor plane in W/(m²·nm) (`OpticalImage`), with per-pixel object
+//! labels, depth and per-band Monte Carlo standard error.
+//!
+//! - Units: scene radiance W/(sr·m²·nm); the camera's weight turns it into film
+//!   irradiance (see `optics` conventions); geometry in metres.
+//! - Pixel estimate: box filter over the pixel area; `spp` samples split
+//!   round-robin into `batches` independent batches; the standard error is the
+//!   spread of the batch means, √(Σ(mₖ−m)²/(B(B−1))).
+//! - Determinism: sample `s` of pixel `(x, y)` uses a PCG32 stream keyed by
+//!   `(seed, y·width + x, s)` and pixels are reduced in a fixed order, so any
+//!   thread count and any region of interest give bit-identical pixels.
+//! - Non-finite samples are dropped (counted in `nan_count`), never written.
+//! - Samples with pdf = 0 terminate the path (zero contribution).
+
+// `!(x > 0.0)` is deliberate throughout: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+pub mod bench;
+pub mod bsdf;
+pub mod film;
+pub mod geometry;
+pub mod integrator;
+pub mod output;
+pub mod sampling;
+pub mod world;
+
+use crate::Result;
+use crate::optical_image::{OpticalImage, Rect};
+use crate::optics::Camera;
+use crate::scene::{FilmSpec, Scene};
+use crate::spectrum::WavelengthGrid;
+use serde::{Deserialize, Serialize};
+
+pub use geometry::BvhKind;
+pub use world::World;
+
+/// Render settings.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct RenderSettings {
+    /// Samples per pixel.
+    pub spp: u32,
+    /// Scattering events per path (pbrt's maxdepth; Mitsuba max_depth − 1).
+    pub max_bounces: u32,
+    pub grid: WavelengthGrid,
+    pub seed: u64,
+    /// Independent sample batches for the standard error (clamped to [1, spp]).
+    pub batches: u32,
+    /// Worker threads; 0 = rayon's default.
+    pub threads: usize,
+    /// Render only this pixel rectangle of the film.
+    pub roi: Option<Rect>,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        Self {
+            spp: 64,
+            max_bounces: 6,
+            grid: WavelengthGrid::default(),
+            seed: 0,
+            batches: 8,
+            threads: 0,
+            roi: None,
+        }
+    }
+}
+
+/// Render `scene` through `camera` onto `film`. The camera's world pose is
+/// `scene.camera.to_world` (identity when the scene has no camera).
+pub fn render(
+    scene: &Scene,
+    camera: &dyn Camera,
+    film: &FilmSpec,
+    settings: &RenderSettings,
+) -> Result<OpticalImage> {
+    let world = World::build(scene, &settings.grid, BvhKind::Bvh2)?; // see geometry.rs: CWBVH is not scale-robust
+    let to_world = scene
+        .camera
+        .as_ref()
+        .map(|c| c.to_world)
+        .unwrap_or(glam::DMat4::IDENTITY);
+    let names = scene.objects.iter().map(|o| o.name.clone()).collect();
+    film::render_world(&world, camera, &to_world, film, settings, names)
+}

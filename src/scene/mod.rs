@@ -1,5 +1,8 @@
 //! Scenes: the model, loaders (meshes, pbrt), and measurement targets.
 
+pub mod kdl_scene;
+pub mod mesh_io;
 pub mod model;
+pub mod shapes;
 
 pub use model::*;

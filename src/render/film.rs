@@ -1,0 +1,208 @@
+//! The film: pixel sampling, camera weights, batch statistics, labels and
+//! depth, parallel over image rows with per-pixel seeding.
+
+use super::RenderSettings;
+use super::integrator::{Scratch, first_hit, trace};
+use super::sampling::Rng;
+use super::world::World;
+use crate::optical_image::{OpticalImage, Rect};
+use crate::optics::Camera;
+use crate::scene::FilmSpec;
+use crate::{Error, Result};
+use glam::{DMat4, DVec2, DVec3, Vec3};
+use rayon::prelude::*;
+
+/// One image row: (row index, irradiance, stderr), labels, depth.
+type RowSlices<'a> = (
+    (((usize, &'a mut [f32]), &'a mut [f32]), &'a mut [u32]),
+    &'a mut [f32],
+);
+
+/// World-space ray for a film point (None: vignetted).
+#[inline]
+fn camera_ray(
+    camera: &dyn Camera,
+    to_world: &DMat4,
+    film_m: DVec2,
+    u: DVec2,
+    lambda_nm: f64,
+) -> Option<(Vec3, Vec3, f64)> {
+    let r = camera.sample_ray(film_m, u, lambda_nm)?;
+    if !(r.weight > 0.0) || !r.weight.is_finite() {
+        return None;
+    }
+    let o = to_world.transform_point3(r.origin);
+    let d = to_world.transform_vector3(r.direction).normalize_or_zero();
+    if d == DVec3::ZERO || !o.is_finite() {
+        return None;
+    }
+    Some((o.as_vec3(), d.as_vec3(), r.weight))
+}
+
+/// Render a window of the film. See `render` for the contract.
+pub fn render_world(
+    world: &World,
+    camera: &dyn Camera,
+    to_world: &DMat4,
+    film: &FilmSpec,
+    s: &RenderSettings,
+    label_names: Vec<String>,
+) -> Result<OpticalImage> {
+    let start = std::time::Instant::now();
+    if film.width_px == 0 || film.height_px == 0 || !(film.pixel_pitch_m > 0.0) {
+        return Err(Error::invalid(format!(
+            "film {}×{} px with pitch {} m is empty or invalid",
+            film.width_px, film.height_px, film.pixel_pitch_m
+        )));
+    }
+    let roi = s
+        .roi
+        .unwrap_or(Rect::new(0, 0, film.width_px, film.height_px));
+    if roi.w == 0
+        || roi.h == 0
+        || roi.x as u64 + roi.w as u64 > film.width_px as u64
+        || roi.y as u64 + roi.h as u64 > film.height_px as u64
+    {
+        return Err(Error::invalid(format!(
+            "region {},{},{},{} is empty or outside the {}×{} film",
+            roi.x, roi.y, roi.w, roi.h, film.width_px, film.height_px
+        )));
+    }
+    if s.spp == 0 {
+        return Err(Error::invalid("spp must be ≥ 1"));
+    }
+    let nb = world.bands;
+    let grid = &s.grid;
+    if grid.len() != nb {
+        return Err(Error::invalid(
+            "settings grid differs from the world's grid",
+        ));
+    }
+    let batches = s.batches.clamp(1, s.spp) as usize;
+    let mut img = OpticalImage::new(
+        film.width_px,
+        film.height_px,
+        roi,
+        film.pixel_pitch_m,
+        grid.clone(),
+    );
+    img.stderr = vec![0.0; img.irradiance.len()];
+    img.label_names = label_names;
+    img.spp = s.spp;
+    let dispersive_cam = camera.is_dispersive();
+    let mid_nm = grid.wavelength(nb / 2);
+    let (fw, fh, pitch) = (
+        film.width_px as f64,
+        film.height_px as f64,
+        film.pixel_pitch_m,
+    );
+    let row_len = roi.w as usize * nb;
+
+    let work = |((((row, irr), se), lab), dep): RowSlices| -> u64 {
+        let py = roi.y + row as u32;
+        let mut sc = Scratch::new(nb);
+        let mut acc = vec![0.0f64; nb * batches];
+        let mut counts = vec![0u32; batches];
+        let mut nan = 0u64;
+        for ix in 0..roi.w as usize {
+            let px = roi.x + ix as u32;
+            let pixel_id = py as u64 * film.width_px as u64 + px as u64;
+            // Label and depth from the ray through the pixel centre, pupil centre.
+            let fc = DVec2::new(
+                (px as f64 + 0.5 - fw / 2.0) * pitch,
+                (fh / 2.0 - (py as f64 + 0.5)) * pitch,
+            );
+            if let Some((o, d, _)) = camera_ray(camera, to_world, fc, DVec2::splat(0.5), mid_nm)
+                && let Some(h) = first_hit(world, o, d)
+            {
+                lab[ix] = h.object;
+                dep[ix] = h.t;
+            }
+            acc.iter_mut().for_each(|x| *x = 0.0);
+            counts.iter_mut().for_each(|x| *x = 0);
+            for si in 0..s.spp {
+                let bi = si as usize % batches;
+                counts[bi] += 1;
+                let mut rng = Rng::for_sample(s.seed, pixel_id, si as u64);
+                let (ux, uy) = rng.uniform2();
+                let (ua, ub) = rng.uniform2();
+                let film_m = DVec2::new(
+                    (px as f64 + ux as f64 - fw / 2.0) * pitch,
+                    (fh / 2.0 - (py as f64 + uy as f64)) * pitch,
+                );
+                let (hero, lambda) = if dispersive_cam {
+                    let b = ((rng.uniform() * nb as f32) as usize).min(nb - 1);
+                    (Some(b), grid.wavelength(b))
+                } else {
+                    (None, mid_nm)
+                };
+                let Some((o, d, weight)) = camera_ray(
+                    camera,
+                    to_world,
+                    film_m,
+                    DVec2::new(ua as f64, ub as f64),
+                    lambda,
+                ) else {
+                    continue;
+                };
+                match hero {
+                    Some(b) => sc
+                        .beta
+                        .iter_mut()
+                        .enumerate()
+                        .for_each(|(j, x)| *x = if j == b { nb as f32 } else { 0.0 }),
+                    None => sc.beta.iter_mut().for_each(|x| *x = 1.0),
+                }
+                trace(world, o, d, s.max_bounces, hero, &mut rng, &mut sc);
+                if sc.l.iter().any(|x| !x.is_finite()) {
+                    nan += 1;
+                    continue;
+                }
+                let a = &mut acc[bi * nb..(bi + 1) * nb];
+                for (x, &l) in a.iter_mut().zip(&sc.l) {
+                    *x += l as f64 * weight;
+                }
+            }
+            // Mean and standard error from the batch means.
+            let n = s.spp as f64;
+            for b in 0..nb {
+                let total: f64 = (0..batches).map(|k| acc[k * nb + b]).sum();
+                let mean = total / n;
+                irr[ix * nb + b] = mean as f32;
+                if batches > 1 {
+                    let mut ss = 0.0;
+                    for k in 0..batches {
+                        let m = acc[k * nb + b] / counts[k].max(1) as f64;
+                        ss += (m - mean) * (m - mean);
+                    }
+                    se[ix * nb + b] =
+                        (ss / (batches as f64 * (batches as f64 - 1.0))).sqrt() as f32;
+                }
+            }
+        }
+        nan
+    };
+
+    let run = |img: &mut OpticalImage| -> u64 {
+        img.irradiance
+            .par_chunks_mut(row_len)
+            .enumerate()
+            .zip(img.stderr.par_chunks_mut(row_len))
+            .zip(img.labels.par_chunks_mut(roi.w as usize))
+            .zip(img.depth_m.par_chunks_mut(roi.w as usize))
+            .map(work)
+            .sum()
+    };
+    let nan = if s.threads > 0 {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(s.threads)
+            .build()
+            .map_err(|e| Error::invalid(format!("thread pool: {e}")))?;
+        pool.install(|| run(&mut img))
+    } else {
+        run(&mut img)
+    };
+    img.nan_count = nan;
+    img.render_s = start.elapsed().as_secs_f64();
+    Ok(img)
+}

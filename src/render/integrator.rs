@@ -1,0 +1,238 @@
+//! Unidirectional path tracing with next-event estimation and multiple
+//! importance sampling (power heuristic), Russian roulette and a bounce limit.
+//!
+//! Bounce counting follows pbrt: `max_bounces = 0` shows emitters only,
+//! `1` adds direct lighting, … Mitsuba's `max_depth = d` equals
+//! `max_bounces = d − 1`.
+//!
+//! Each path carries every band of the grid. When it meets a dispersive
+//! dielectric (ior varies with λ) it keeps one uniformly chosen band (the hero
+//! wavelength), scaled by the band count, and terminates the others — unbiased,
+//! and only dispersive paths pay the colour noise.
+
+use super::geometry::offset_ray_origin;
+use super::sampling::{Frame, Rng, power_heuristic};
+use super::world::{LightKind, World};
+use glam::Vec3;
+
+/// Fraction of a shadow ray's length left untested at its far end, so it does
+/// not hit the light it aims at (pbrt's ShadowEpsilon).
+const SHADOW_EPS: f32 = 1e-4;
+
+/// Per-thread buffers: one allocation per tile row, none per ray.
+pub struct Scratch {
+    pub beta: Vec<f32>,
+    pub l: Vec<f32>,
+    f: Vec<f32>,
+    li: Vec<f32>,
+}
+
+impl Scratch {
+    pub fn new(nb: usize) -> Self {
+        Scratch {
+            beta: vec![0.0; nb],
+            l: vec![0.0; nb],
+            f: vec![0.0; nb],
+            li: vec![0.0; nb],
+        }
+    }
+}
+
+/// Result of the first intersection (for labels and depth).
+pub struct FirstHit {
+    pub t: f32,
+    pub object: u32,
+}
+
+pub fn first_hit(world: &World, o: Vec3, d: Vec3) -> Option<FirstHit> {
+    world
+        .accel
+        .intersect(o, d, f32::INFINITY)
+        .map(|h| FirstHit {
+            t: h.h.t,
+            object: world.info[h.prim as usize].object,
+        })
+}
+
+#[inline]
+fn add_scaled(l: &mut [f32], beta: &[f32], e: &[f32], s: f32) {
+    for ((o, &b), &x) in l.iter_mut().zip(beta).zip(e) {
+        *o += b * x * s;
+    }
+}
+
+/// Trace one path. On entry `sc.beta` holds the initial throughput (1 for all
+/// bands, or one-hot for a hero camera sample with `hero = Some(band)`).
+/// On return `sc.l` holds the radiance estimate.
+pub fn trace(
+    world: &World,
+    mut o: Vec3,
+    mut d: Vec3,
+    max_bounces: u32,
+    mut hero: Option<usize>,
+    rng: &mut Rng,
+    sc: &mut Scratch,
+) {
+    let nb = world.bands;
+    sc.l.iter_mut().for_each(|x| *x = 0.0);
+    let mut specular = true;
+    let mut prev_pdf = 0.0f32;
+    let mut eta_scale = 1.0f32;
+    let mut depth = 0u32;
+    loop {
+        let Some(hit) = world.accel.intersect(o, d, f32::INFINITY) else {
+            for &li in &world.infinite {
+                if let LightKind::Infinite { l } = &world.lights[li as usize] {
+                    let w = if specular {
+                        1.0
+                    } else {
+                        let pl = world.light_pmf[li as usize] / (4.0 * std::f32::consts::PI);
+                        power_heuristic(prev_pdf, pl)
+                    };
+                    add_scaled(&mut sc.l, &sc.beta, l, w);
+                }
+            }
+            break;
+        };
+        let info = world.info[hit.prim as usize];
+        let shape = &world.accel.shapes[hit.prim as usize];
+        let (p, p_err, ng) = shape.surface(o, d, &hit.h);
+        let dlen = d.length();
+        let wo_w = -d / dlen;
+        // Emission.
+        if info.light != u32::MAX
+            && let LightKind::Area { le, two_sided, .. } = &world.lights[info.light as usize]
+        {
+            let cos_l = ng.dot(wo_w);
+            if cos_l > 0.0 || (*two_sided && cos_l < 0.0) {
+                let w = if specular {
+                    1.0
+                } else {
+                    let pl = world.area_light_pdf(info.light, hit.prim, hit.h.t * dlen, cos_l);
+                    power_heuristic(prev_pdf, pl)
+                };
+                add_scaled(&mut sc.l, &sc.beta, le, w);
+            }
+        }
+        if depth >= max_bounces {
+            break;
+        }
+        let bsdf = &world.bsdfs[info.material as usize];
+        if bsdf.is_black() {
+            break;
+        }
+        // Shading normal: interpolated if the mesh has normals, else geometric.
+        let mut ns = ng;
+        if info.normals != u32::MAX {
+            let n3 = world.normals[info.normals as usize];
+            let b = hit.h.b;
+            let n = (n3[0] * b[0] + n3[1] * b[1] + n3[2] * b[2]).normalize_or_zero();
+            if n != Vec3::ZERO {
+                ns = if n.dot(ng) < 0.0 { -n } else { n };
+            }
+        }
+        // Opaque materials are two-sided: face the normals towards wo.
+        let transmissive = bsdf.is_transmissive();
+        let (ng_s, ns_s) = if !transmissive && ng.dot(wo_w) < 0.0 {
+            (-ng, -ns)
+        } else {
+            (ng, ns)
+        };
+        let frame = Frame::from_normal(ns_s);
+        let wo = frame.to_local(wo_w);
+
+        if bsdf.is_dispersive() && hero.is_none() {
+            let b = ((rng.uniform() * nb as f32) as usize).min(nb - 1);
+            for (j, x) in sc.beta.iter_mut().enumerate() {
+                *x = if j == b { *x * nb as f32 } else { 0.0 };
+            }
+            hero = Some(b);
+        }
+
+        // Next-event estimation.
+        if !bsdf.is_delta() && wo.z > 0.0 {
+            let (u0, u1, u2) = (rng.uniform(), rng.uniform(), rng.uniform());
+            if let Some(ls) = world.sample_light(p, u0, u1, u2, &mut sc.li) {
+                let wi = frame.to_local(ls.wi);
+                if wi.z > 0.0 && ls.wi.dot(ng_s) > 0.0 {
+                    let pdf_b = bsdf.eval(wo, wi, &mut sc.f);
+                    let origin = offset_ray_origin(p, p_err, ng_s, ls.wi);
+                    let visible = match ls.target {
+                        Some((pl, err_l, nl)) => {
+                            let tgt = if nl == Vec3::ZERO {
+                                pl
+                            } else {
+                                offset_ray_origin(pl, err_l, nl, -ls.wi)
+                            };
+                            // Unit direction: obvhs' slab test clamps tiny inverse components,
+                            // which would misbehave for short unnormalised vectors (mm scenes).
+                            let dv = tgt - origin;
+                            let len = dv.length();
+                            len > 0.0
+                                && world.accel.unoccluded(
+                                    origin,
+                                    dv / len,
+                                    len * (1.0 - SHADOW_EPS),
+                                )
+                        }
+                        None => world.accel.unoccluded(origin, ls.wi, f32::INFINITY),
+                    };
+                    if visible {
+                        let w = if ls.delta {
+                            1.0
+                        } else {
+                            power_heuristic(ls.pdf, pdf_b)
+                        };
+                        let s = wi.z * w / ls.pdf;
+                        for (((o, &b), &f), &e) in
+                            sc.l.iter_mut().zip(&sc.beta).zip(&sc.f).zip(&sc.li)
+                        {
+                            *o += b * f * e * s;
+                        }
+                    }
+                }
+            }
+        }
+
+        // BSDF sampling.
+        let (u0, u1, u2) = (rng.uniform(), rng.uniform(), rng.uniform());
+        let Some(bs) = bsdf.sample(wo, u0, u1, u2, hero, &mut sc.f) else {
+            break;
+        };
+        if !(bs.pdf > 0.0) || !bs.pdf.is_finite() {
+            break;
+        }
+        let wi_w = frame.to_world(bs.wi).normalize();
+        // Reject light leaks: reflection must stay on the geometric side of wo.
+        let same_side = wi_w.dot(ng_s) * wo_w.dot(ng_s) > 0.0;
+        let refl_local = bs.wi.z * wo.z > 0.0;
+        if same_side != refl_local {
+            break;
+        }
+        for (b, &f) in sc.beta.iter_mut().zip(&sc.f) {
+            *b *= f;
+        }
+        specular = bs.delta;
+        prev_pdf = bs.pdf;
+        eta_scale *= bs.eta_scale;
+        o = offset_ray_origin(p, p_err, ng_s, wi_w);
+        d = wi_w;
+        depth += 1;
+        // Russian roulette on the throughput with refraction scaling undone.
+        let mut m = sc.beta.iter().fold(0.0f32, |a, &b| a.max(b)) * eta_scale;
+        if hero.is_some() {
+            m /= nb as f32;
+        }
+        if !(m > 0.0) {
+            break;
+        }
+        if m < 1.0 && depth > 1 {
+            let q = (1.0 - m).max(0.0);
+            if rng.uniform() < q {
+                break;
+            }
+            let s = 1.0 / (1.0 - q);
+            sc.beta.iter_mut().for_each(|b| *b *= s);
+        }
+    }
+}

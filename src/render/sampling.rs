@@ -1,0 +1,186 @@
+//! Random numbers and sample warps.
+//!
+//! Every pixel sample owns its own PCG32 stream keyed by `(seed, pixel, sample)`
+//! through SplitMix64 hashing, so a pixel's value never depends on which thread
+//! or tile rendered it, nor on the region of interest.
+
+use glam::Vec3;
+use std::f32::consts::PI;
+
+/// SplitMix64 finaliser (a good 64-bit mixer).
+#[inline]
+pub fn mix64(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// PCG32 (XSH-RR) generator.
+#[derive(Clone, Debug)]
+pub struct Rng {
+    state: u64,
+    inc: u64,
+}
+
+impl Rng {
+    /// Independent stream for one pixel sample.
+    pub fn for_sample(seed: u64, pixel: u64, sample: u64) -> Self {
+        let a = mix64(seed ^ mix64(pixel.wrapping_mul(0xD1B5_4A32_D192_ED03)));
+        let b = mix64(a ^ sample.wrapping_mul(0x8CB9_2BA7_2F3D_8DD7));
+        let mut r = Rng {
+            state: 0,
+            inc: (mix64(b ^ 0x5851_F42D_4C95_7F2D) << 1) | 1,
+        };
+        r.next_u32();
+        r.state = r.state.wrapping_add(b);
+        r.next_u32();
+        r
+    }
+    #[inline]
+    pub fn next_u32(&mut self) -> u32 {
+        let old = self.state;
+        self.state = old
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(self.inc);
+        let xorshifted = (((old >> 18) ^ old) >> 27) as u32;
+        let rot = (old >> 59) as u32;
+        xorshifted.rotate_right(rot)
+    }
+    /// Uniform in [0, 1).
+    #[inline]
+    pub fn uniform(&mut self) -> f32 {
+        (self.next_u32() >> 8) as f32 * (1.0 / 16_777_216.0)
+    }
+    #[inline]
+    pub fn uniform2(&mut self) -> (f32, f32) {
+        (self.uniform(), self.uniform())
+    }
+}
+
+/// Orthonormal frame around a unit normal (Duff et al. 2017 branchless basis).
+#[derive(Clone, Copy, Debug)]
+pub struct Frame {
+    pub s: Vec3,
+    pub t: Vec3,
+    pub n: Vec3,
+}
+
+impl Frame {
+    #[inline]
+    pub fn from_normal(n: Vec3) -> Self {
+        let sign = 1.0f32.copysign(n.z);
+        let a = -1.0 / (sign + n.z);
+        let b = n.x * n.y * a;
+        let s = Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
+        let t = Vec3::new(b, sign + n.y * n.y * a, -n.y);
+        Frame { s, t, n }
+    }
+    #[inline]
+    pub fn to_local(&self, v: Vec3) -> Vec3 {
+        Vec3::new(v.dot(self.s), v.dot(self.t), v.dot(self.n))
+    }
+    #[inline]
+    pub fn to_world(&self, v: Vec3) -> Vec3 {
+        self.s * v.x + self.t * v.y + self.n * v.z
+    }
+}
+
+/// Concentric map of the unit square to the unit disk.
+#[inline]
+pub fn square_to_disk(u: f32, v: f32) -> (f32, f32) {
+    let a = 2.0 * u - 1.0;
+    let b = 2.0 * v - 1.0;
+    if a == 0.0 && b == 0.0 {
+        return (0.0, 0.0);
+    }
+    let (r, phi) = if a.abs() > b.abs() {
+        (a, (PI / 4.0) * (b / a))
+    } else {
+        (b, PI / 2.0 - (PI / 4.0) * (a / b))
+    };
+    (r * phi.cos(), r * phi.sin())
+}
+
+/// Cosine-weighted hemisphere around +z; pdf = cosθ/π.
+#[inline]
+pub fn cosine_hemisphere(u: f32, v: f32) -> Vec3 {
+    let (x, y) = square_to_disk(u, v);
+    let z = (1.0 - x * x - y * y).max(0.0).sqrt();
+    Vec3::new(x, y, z)
+}
+
+/// Uniform direction on the unit sphere; pdf = 1/(4π).
+#[inline]
+pub fn uniform_sphere(u: f32, v: f32) -> Vec3 {
+    let z = 1.0 - 2.0 * u;
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = 2.0 * PI * v;
+    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+/// Uniform barycentrics on a triangle (Heitz's low-distortion map is not needed
+/// here; this is the classic square-root map). Returns (b0, b1, b2).
+#[inline]
+pub fn uniform_triangle(u: f32, v: f32) -> (f32, f32, f32) {
+    let su = u.sqrt();
+    let b0 = 1.0 - su;
+    let b1 = v * su;
+    (b0, b1, (1.0 - b0 - b1).max(0.0))
+}
+
+/// Sample an index from a cumulative table (last entry = 1); returns index and the
+/// remapped uniform.
+pub fn sample_cdf(cdf: &[f32], u: f32) -> usize {
+    let i = cdf.partition_point(|&c| c <= u);
+    i.min(cdf.len() - 1)
+}
+
+/// Power heuristic (β = 2) for two strategies with one sample each.
+#[inline]
+pub fn power_heuristic(pdf_a: f32, pdf_b: f32) -> f32 {
+    let a = pdf_a * pdf_a;
+    let b = pdf_b * pdf_b;
+    if a.is_infinite() {
+        return 1.0;
+    }
+    if a + b == 0.0 { 0.0 } else { a / (a + b) }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    #[test]
+    fn uniform_is_in_unit_interval_and_streams_differ() {
+        let mut a = Rng::for_sample(1, 2, 3);
+        let mut b = Rng::for_sample(1, 2, 4);
+        let mut same = 0;
+        for _ in 0..1000 {
+            let x = a.uniform();
+            let y = b.uniform();
+            assert!((0.0..1.0).contains(&x));
+            if x == y {
+                same += 1;
+            }
+        }
+        assert!(same < 5);
+    }
+    #[test]
+    fn frame_is_orthonormal() {
+        for n in [
+            Vec3::Z,
+            -Vec3::Z,
+            Vec3::new(0.3, -0.5, 0.8).normalize(),
+            Vec3::X,
+        ] {
+            let f = Frame::from_normal(n);
+            assert!(
+                f.s.dot(f.t).abs() < 1e-6
+                    && f.s.dot(n).abs() < 1e-6
+                    && (f.s.length() - 1.0).abs() < 1e-6
+            );
+            let v = Vec3::new(0.1, 0.2, 0.97).normalize();
+            assert!((f.to_local(f.to_world(v)) - v).length() < 1e-6);
+        }
+    }
+}

@@ -1,0 +1,586 @@
+//! The render-ready world: shapes in a BVH, per-primitive material / object /
+//! light ids, BSDFs and light spectra resampled onto the wavelength grid, and
+//! the light-selection distribution (proportional to emitted power).
+//!
+//! Instances are flattened into world-space triangles. A mesh referenced by any
+//! instance is treated as a prototype only and is not rendered by itself.
+
+use super::bsdf::Bsdf;
+use super::geometry::{Accel, BvhKind, Shape};
+use super::sampling::{Frame, sample_cdf, uniform_sphere, uniform_triangle};
+use crate::scene::{Emission, Light, Material, Scene};
+use crate::spectrum::{Spectrum, WavelengthGrid};
+use crate::{Error, Result};
+use glam::{DVec3, Vec3};
+use std::f32::consts::PI;
+
+/// Per-primitive attributes.
+#[derive(Clone, Copy, Debug)]
+pub struct PrimInfo {
+    pub material: u32,
+    pub object: u32,
+    /// Index into `World::lights`, or u32::MAX.
+    pub light: u32,
+    /// Index into `World::normals` (per-vertex shading normals), or u32::MAX.
+    pub normals: u32,
+}
+
+/// A light resampled on the grid.
+#[derive(Clone, Debug)]
+pub enum LightKind {
+    Area {
+        prim: u32,
+        le: Vec<f32>,
+        two_sided: bool,
+    },
+    Point {
+        p: Vec3,
+        i: Vec<f32>,
+    },
+    Spot {
+        p: Vec3,
+        frame: Frame,
+        cos_total: f32,
+        cos_start: f32,
+        i: Vec<f32>,
+    },
+    Distant {
+        dir: Vec3,
+        e: Vec<f32>,
+    },
+    Infinite {
+        l: Vec<f32>,
+    },
+}
+
+/// A light sample seen from a shading point.
+pub struct LightSample {
+    /// Unit direction towards the light.
+    pub wi: Vec3,
+    /// Solid-angle pdf including the light selection probability (delta: the
+    /// selection probability only).
+    pub pdf: f32,
+    pub delta: bool,
+    /// Target point (area / point / spot) or None (direction-only lights).
+    pub target: Option<(Vec3, Vec3, Vec3)>,
+}
+
+pub struct World {
+    pub accel: Accel,
+    pub info: Vec<PrimInfo>,
+    pub normals: Vec<[Vec3; 3]>,
+    pub bsdfs: Vec<Bsdf>,
+    pub lights: Vec<LightKind>,
+    pub light_pmf: Vec<f32>,
+    light_cdf: Vec<f32>,
+    pub infinite: Vec<u32>,
+    pub center: Vec3,
+    pub radius: f32,
+    pub bands: usize,
+    /// A dielectric with wavelength-dependent ior is present.
+    pub dispersive: bool,
+}
+
+fn resample(s: &Spectrum, grid: &WavelengthGrid, what: &str) -> Result<Vec<f32>> {
+    let v = s
+        .resample(grid)
+        .map_err(|e| Error::invalid(format!("{what}: {e}")))?;
+    if v.iter().any(|x| !x.is_finite()) {
+        return Err(Error::invalid(format!(
+            "{what}: spectrum '{}' has non-finite values",
+            s.name
+        )));
+    }
+    Ok(v.into_iter().map(|x| x as f32).collect())
+}
+
+fn mean(v: &[f32]) -> f32 {
+    v.iter().sum::<f32>() / v.len().max(1) as f32
+}
+
+fn finite3(v: DVec3) -> bool {
+    v.is_finite()
+}
+
+impl World {
+    pub fn build(scene: &Scene, grid: &WavelengthGrid, kind: BvhKind) -> Result<World> {
+        if grid.is_empty() {
+            return Err(Error::invalid("wavelength grid is empty"));
+        }
+        let nb = grid.len();
+        let mut bsdfs = Vec::with_capacity(scene.materials.len());
+        let mut dispersive = false;
+        for m in &scene.materials {
+            let what = format!("material '{}'", m.name);
+            let b = match &m.material {
+                Material::Diffuse { reflectance } => Bsdf::Diffuse {
+                    r: resample(reflectance, grid, &what)?,
+                },
+                Material::DiffuseSpecular {
+                    diffuse,
+                    specular,
+                    roughness,
+                } => Bsdf::diffuse_specular(
+                    resample(diffuse, grid, &what)?,
+                    resample(specular, grid, &what)?,
+                    *roughness as f32,
+                ),
+                Material::Mirror { reflectance } => Bsdf::Mirror {
+                    r: resample(reflectance, grid, &what)?,
+                },
+                Material::Dielectric { ior } => {
+                    let eta = resample(ior, grid, &what)?;
+                    if eta.iter().any(|&e| e <= 0.0) {
+                        return Err(Error::invalid(format!("{what}: ior must be > 0")));
+                    }
+                    let d = eta.iter().any(|&e| e != eta[0]);
+                    dispersive |= d;
+                    Bsdf::Dielectric { eta, dispersive: d }
+                }
+                Material::Conductor { eta, k, roughness } => Bsdf::Conductor {
+                    eta: resample(eta, grid, &what)?,
+                    k: resample(k, grid, &what)?,
+                    alpha: *roughness as f32,
+                },
+                Material::Black => Bsdf::Black,
+            };
+            bsdfs.push(b);
+        }
+        let nmat = bsdfs.len() as u32;
+        let check_mat = |m: u32, what: &str| -> Result<()> {
+            if m >= nmat {
+                return Err(Error::invalid(format!(
+                    "{what} refers to material {m}, but the scene has {nmat}"
+                )));
+            }
+            Ok(())
+        };
+
+        let mut shapes = Vec::new();
+        let mut info = Vec::new();
+        let mut normals = Vec::new();
+        let mut lights = Vec::new();
+        let mut emitters: Vec<(usize, Emission)> = Vec::new();
+        let mut prototype = vec![false; scene.meshes.len()];
+        for inst in &scene.instances {
+            for &p in &inst.prototype {
+                if p >= scene.meshes.len() {
+                    return Err(Error::invalid(format!(
+                        "instance refers to mesh {p}, but the scene has {}",
+                        scene.meshes.len()
+                    )));
+                }
+                prototype[p] = true;
+            }
+        }
+        let mut add_mesh =
+            |mesh: &crate::scene::Mesh, xf: Option<glam::DMat4>, object: u32| -> Result<()> {
+                check_mat(mesh.material, "mesh")?;
+                let nrm_xf = xf.map(|m| m.inverse().transpose());
+                for tri in &mesh.indices {
+                    let mut p = [Vec3::ZERO; 3];
+                    for k in 0..3 {
+                        let idx = tri[k] as usize;
+                        let v = *mesh.positions.get(idx).ok_or_else(|| {
+                            Error::invalid(format!(
+                                "mesh index {idx} out of range ({} vertices)",
+                                mesh.positions.len()
+                            ))
+                        })?;
+                        let v = v.as_dvec3();
+                        let v = match xf {
+                            Some(m) => m.transform_point3(v),
+                            None => v,
+                        };
+                        if !finite3(v) {
+                            return Err(Error::invalid("mesh vertex is not finite"));
+                        }
+                        p[k] = v.as_vec3();
+                    }
+                    let area = (p[1] - p[0]).cross(p[2] - p[0]).length();
+                    if !(area > 0.0) {
+                        continue; // degenerate: never hit, never sampled
+                    }
+                    let nidx = match &mesh.normals {
+                        Some(ns) if ns.len() == mesh.positions.len() => {
+                            let mut n3 = [Vec3::ZERO; 3];
+                            for k in 0..3 {
+                                let n = ns[tri[k] as usize].as_dvec3();
+                                let n = match nrm_xf {
+                                    Some(m) => m.transform_vector3(n),
+                                    None => n,
+                                };
+                                n3[k] = n.as_vec3().normalize_or_zero();
+                            }
+                            if n3.iter().all(|n| n.is_finite() && n.length_squared() > 0.5) {
+                                normals.push(n3);
+                                (normals.len() - 1) as u32
+                            } else {
+                                u32::MAX
+                            }
+                        }
+                        _ => u32::MAX,
+                    };
+                    let prim = shapes.len();
+                    shapes.push(Shape::Triangle { p });
+                    info.push(PrimInfo {
+                        material: mesh.material,
+                        object,
+                        light: u32::MAX,
+                        normals: nidx,
+                    });
+                    if let Some(e) = &mesh.emission {
+                        emitters.push((prim, e.clone()));
+                    }
+                }
+                Ok(())
+            };
+        for (i, m) in scene.meshes.iter().enumerate() {
+            if !prototype[i] {
+                add_mesh(m, None, m.object)?;
+            }
+        }
+        for inst in &scene.instances {
+            for &p in &inst.prototype {
+                let m = &scene.meshes[p];
+                add_mesh(m, Some(inst.to_world), inst.object.unwrap_or(m.object))?;
+            }
+        }
+        for s in &scene.spheres {
+            check_mat(s.material, "sphere")?;
+            if !(s.radius > 0.0) || !s.center.is_finite() || !s.radius.is_finite() {
+                return Err(Error::invalid(format!(
+                    "sphere with radius {} at {:?} is invalid",
+                    s.radius, s.center
+                )));
+            }
+            let prim = shapes.len();
+            shapes.push(Shape::Sphere {
+                center: s.center.as_vec3(),
+                radius: s.radius as f32,
+            });
+            info.push(PrimInfo {
+                material: s.material,
+                object: s.object,
+                light: u32::MAX,
+                normals: u32::MAX,
+            });
+            if let Some(e) = &s.emission {
+                emitters.push((prim, e.clone()));
+            }
+        }
+        for d in &scene.disks {
+            check_mat(d.material, "disk")?;
+            let n = d.normal.normalize_or_zero();
+            if !(d.radius > 0.0)
+                || !d.center.is_finite()
+                || n == DVec3::ZERO
+                || !d.radius.is_finite()
+            {
+                return Err(Error::invalid(format!(
+                    "disk with radius {} normal {:?} is invalid",
+                    d.radius, d.normal
+                )));
+            }
+            let prim = shapes.len();
+            shapes.push(Shape::Disk {
+                center: d.center.as_vec3(),
+                normal: n.as_vec3(),
+                radius: d.radius as f32,
+            });
+            info.push(PrimInfo {
+                material: d.material,
+                object: d.object,
+                light: u32::MAX,
+                normals: u32::MAX,
+            });
+            if let Some(e) = &d.emission {
+                emitters.push((prim, e.clone()));
+            }
+        }
+        // Scene bounds (for distant / infinite light power).
+        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        for s in &shapes {
+            let b = obvhs::Boundable::aabb(s);
+            lo = lo.min(Vec3::from(b.min));
+            hi = hi.max(Vec3::from(b.max));
+        }
+        let (center, radius) = if shapes.is_empty() {
+            (Vec3::ZERO, 1.0)
+        } else {
+            ((lo + hi) * 0.5, ((hi - lo) * 0.5).length().max(1e-30))
+        };
+
+        let mut power = Vec::new();
+        for (prim, e) in &emitters {
+            let le = resample(&e.radiance, grid, "emission")?;
+            let pw = mean(&le) * shapes[*prim].area() * PI * if e.two_sided { 2.0 } else { 1.0 };
+            info[*prim].light = lights.len() as u32;
+            lights.push(LightKind::Area {
+                prim: *prim as u32,
+                le,
+                two_sided: e.two_sided,
+            });
+            power.push(pw);
+        }
+        let mut infinite = Vec::new();
+        for l in &scene.lights {
+            match l {
+                Light::Point {
+                    position,
+                    intensity,
+                } => {
+                    let i = resample(intensity, grid, "point light")?;
+                    power.push(4.0 * PI * mean(&i));
+                    lights.push(LightKind::Point {
+                        p: position.as_vec3(),
+                        i,
+                    });
+                }
+                Light::Spot {
+                    position,
+                    direction,
+                    cone_angle_deg,
+                    falloff_start_deg,
+                    intensity,
+                } => {
+                    let i = resample(intensity, grid, "spot light")?;
+                    let dir = direction.normalize_or_zero();
+                    if dir == DVec3::ZERO {
+                        return Err(Error::invalid("spot light direction is zero"));
+                    }
+                    let cos_total = (cone_angle_deg.to_radians().cos()) as f32;
+                    let cos_start =
+                        (falloff_start_deg.min(*cone_angle_deg).to_radians().cos()) as f32;
+                    power.push(mean(&i) * 2.0 * PI * (1.0 - 0.5 * (cos_start + cos_total)));
+                    lights.push(LightKind::Spot {
+                        p: position.as_vec3(),
+                        frame: Frame::from_normal(dir.as_vec3()),
+                        cos_total,
+                        cos_start,
+                        i,
+                    });
+                }
+                Light::Distant {
+                    direction,
+                    irradiance,
+                } => {
+                    let e = resample(irradiance, grid, "distant light")?;
+                    let dir = direction.normalize_or_zero();
+                    if dir == DVec3::ZERO {
+                        return Err(Error::invalid("distant light direction is zero"));
+                    }
+                    power.push(mean(&e) * PI * radius * radius);
+                    lights.push(LightKind::Distant {
+                        dir: dir.as_vec3(),
+                        e,
+                    });
+                }
+                Light::Infinite { radiance } => {
+                    let l = resample(radiance, grid, "infinite light")?;
+                    power.push(mean(&l) * 4.0 * PI * PI * radius * radius);
+                    infinite.push(lights.len() as u32);
+                    lights.push(LightKind::Infinite { l });
+                }
+            }
+        }
+        let total: f32 = power.iter().map(|p| p.max(0.0)).sum();
+        let light_pmf: Vec<f32> = if total > 0.0 && total.is_finite() {
+            power.iter().map(|p| p.max(0.0) / total).collect()
+        } else {
+            vec![1.0 / power.len().max(1) as f32; power.len()]
+        };
+        let mut acc = 0.0;
+        let mut light_cdf: Vec<f32> = light_pmf
+            .iter()
+            .map(|p| {
+                acc += p;
+                acc
+            })
+            .collect();
+        if let Some(l) = light_cdf.last_mut() {
+            *l = 1.0;
+        }
+        Ok(World {
+            accel: Accel::build(shapes, kind),
+            info,
+            normals,
+            bsdfs,
+            lights,
+            light_pmf,
+            light_cdf,
+            infinite,
+            center,
+            radius,
+            bands: nb,
+            dispersive,
+        })
+    }
+
+    /// Pick a light and sample a direction to it from point `p`. Radiance
+    /// arriving at `p` (unoccluded) is written to `li`.
+    pub fn sample_light(
+        &self,
+        p: Vec3,
+        u0: f32,
+        u1: f32,
+        u2: f32,
+        li: &mut [f32],
+    ) -> Option<LightSample> {
+        if self.lights.is_empty() {
+            return None;
+        }
+        let idx = sample_cdf(&self.light_cdf, u0);
+        let sel = self.light_pmf[idx];
+        if !(sel > 0.0) {
+            return None;
+        }
+        match &self.lights[idx] {
+            LightKind::Area {
+                prim,
+                le,
+                two_sided,
+            } => {
+                let shape = &self.accel.shapes[*prim as usize];
+                let (pl, err, nl) = match *shape {
+                    super::geometry::Shape::Triangle { p: v } => {
+                        let (b0, b1, b2) = uniform_triangle(u1, u2);
+                        let pt = v[0] * b0 + v[1] * b1 + v[2] * b2;
+                        let err = ((v[0] * b0).abs() + (v[1] * b1).abs() + (v[2] * b2).abs())
+                            * super::geometry::gamma(6);
+                        (pt, err, (v[1] - v[0]).cross(v[2] - v[0]).normalize())
+                    }
+                    super::geometry::Shape::Sphere { center, radius } => {
+                        let n = uniform_sphere(u1, u2);
+                        let pt = center + n * radius;
+                        (
+                            pt,
+                            (pt.abs() + Vec3::splat(radius)) * (4.0 * f32::EPSILON),
+                            n,
+                        )
+                    }
+                    super::geometry::Shape::Disk {
+                        center,
+                        normal,
+                        radius,
+                    } => {
+                        let (x, y) = super::sampling::square_to_disk(u1, u2);
+                        let f = Frame::from_normal(normal);
+                        let pt = center + f.to_world(Vec3::new(x * radius, y * radius, 0.0));
+                        (pt, (pt.abs() + center.abs()) * (4.0 * f32::EPSILON), normal)
+                    }
+                };
+                let d = pl - p;
+                let dist2 = d.length_squared();
+                if !(dist2 > 0.0) {
+                    return None;
+                }
+                let wi = d / dist2.sqrt();
+                let cos_l = -nl.dot(wi);
+                if cos_l <= 0.0 && !two_sided {
+                    return None;
+                }
+                let cos_l = cos_l.abs();
+                if !(cos_l > 0.0) {
+                    return None;
+                }
+                let pdf = sel * dist2 / (cos_l * shape.area());
+                if !(pdf > 0.0) || !pdf.is_finite() {
+                    return None;
+                }
+                li.copy_from_slice(le);
+                Some(LightSample {
+                    wi,
+                    pdf,
+                    delta: false,
+                    target: Some((pl, err, nl)),
+                })
+            }
+            LightKind::Point { p: lp, i } => {
+                let d = *lp - p;
+                let dist2 = d.length_squared();
+                if !(dist2 > 0.0) {
+                    return None;
+                }
+                let s = 1.0 / dist2;
+                for (o, &x) in li.iter_mut().zip(i) {
+                    *o = x * s;
+                }
+                Some(LightSample {
+                    wi: d / dist2.sqrt(),
+                    pdf: sel,
+                    delta: true,
+                    target: Some((*lp, Vec3::ZERO, Vec3::ZERO)),
+                })
+            }
+            LightKind::Spot {
+                p: lp,
+                frame,
+                cos_total,
+                cos_start,
+                i,
+            } => {
+                let d = *lp - p;
+                let dist2 = d.length_squared();
+                if !(dist2 > 0.0) {
+                    return None;
+                }
+                let wi = d / dist2.sqrt();
+                let c = frame.n.dot(-wi);
+                let fall = smooth_falloff(c, *cos_total, *cos_start);
+                if fall <= 0.0 {
+                    return None;
+                }
+                let s = fall / dist2;
+                for (o, &x) in li.iter_mut().zip(i) {
+                    *o = x * s;
+                }
+                Some(LightSample {
+                    wi,
+                    pdf: sel,
+                    delta: true,
+                    target: Some((*lp, Vec3::ZERO, Vec3::ZERO)),
+                })
+            }
+            LightKind::Distant { dir, e } => {
+                li.copy_from_slice(e);
+                Some(LightSample {
+                    wi: -*dir,
+                    pdf: sel,
+                    delta: true,
+                    target: None,
+                })
+            }
+            LightKind::Infinite { l } => {
+                li.copy_from_slice(l);
+                let wi = uniform_sphere(u1, u2);
+                Some(LightSample {
+                    wi,
+                    pdf: sel / (4.0 * PI),
+                    delta: false,
+                    target: None,
+                })
+            }
+        }
+    }
+
+    /// Solid-angle pdf with which `sample_light` would have produced the hit
+    /// on area light `light` at distance `dist` with cosine `cos_l` there.
+    #[inline]
+    pub fn area_light_pdf(&self, light: u32, prim: u32, dist: f32, cos_l: f32) -> f32 {
+        let area = self.accel.shapes[prim as usize].area();
+        self.light_pmf[light as usize] * dist * dist / (cos_l.abs() * area)
+    }
+}
+
+/// pbrt-v4 spot fall-off: smoothstep between the cone and the fall-off start.
+fn smooth_falloff(cos: f32, cos_total: f32, cos_start: f32) -> f32 {
+    if cos >= cos_start {
+        return 1.0;
+    }
+    if cos <= cos_total || cos_start <= cos_total {
+        return 0.0;
+    }
+    let t = ((cos - cos_total) / (cos_start - cos_total)).clamp(0.0, 1.0);
+    t * t * (3.0 - 2.0 * t)
+}
