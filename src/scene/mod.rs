@@ -1,5 +1,6 @@
 //! Scenes: the model, loaders (meshes, pbrt), and measurement targets.
 
 pub mod model;
+pub mod pbrt;
 
 pub use model::*;
