@@ -341,7 +341,9 @@ impl Parser {
     }
 
     fn value(&mut self, p: &mut Param, t: &Token, in_brackets: bool) -> PResult<()> {
-        let help = in_brackets.then(|| "missing ']'?".to_string());
+        // A bare word inside brackets that is not a value is most likely the next directive.
+        let looks_like_directive = t.kind == TokenKind::Word && self.text(t.span).starts_with(|c: char| c.is_ascii_uppercase());
+        let help = (in_brackets && looks_like_directive).then(|| "missing ']'?".to_string());
         let bad = |s: &Self, what: &str| {
             let mut e = SpanError::new(
                 t.span,
