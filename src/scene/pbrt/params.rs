@@ -327,7 +327,7 @@ fn to_spectrum(p: &Param, kind: SpectrumKind, ctx: &mut Ctx) -> PResult<Option<S
                     format!("rgb reflectance '{name}' has a value above 1 ({rgb:?}); reflectances must be in [0, 1]"),
                 ));
             }
-            Ok(Some(rgb_to_spectrum(rgb, kind, name)))
+            rgb_to_spectrum(rgb, kind, name).map(Some).map_err(|m| SpanError::new(p.span, m))
         }
         ParamType::Blackbody => {
             let (t, scale) = match p.nums.len() {
@@ -382,7 +382,7 @@ fn logistic(x: f64) -> f64 {
 }
 
 /// The smooth, grey-preserving rgb → spectrum basis (see module docs), 360–830 nm at 5 nm.
-pub fn rgb_to_spectrum(rgb: [f64; 3], kind: SpectrumKind, name: &str) -> Spectrum {
+pub fn rgb_to_spectrum(rgb: [f64; 3], kind: SpectrumKind, name: &str) -> Result<Spectrum, String> {
     const W: f64 = 12.0;
     let wl: Vec<f64> = (0..=94).map(|i| 360.0 + 5.0 * i as f64).collect();
     let white = if kind == SpectrumKind::Illuminant { Some(d65_normalized()) } else { None };
@@ -399,16 +399,18 @@ pub fn rgb_to_spectrum(rgb: [f64; 3], kind: SpectrumKind, name: &str) -> Spectru
             }
         })
         .collect();
-    let sp = Spectrum::new(name.to_string(), wl, vals).expect("finite increasing grid");
-    sp.with_extrapolation(if kind == SpectrumKind::Illuminant { Extrapolation::Zero } else { Extrapolation::Clamp })
+    // Err only when huge rgb values overflow to infinity.
+    let sp = Spectrum::new(name.to_string(), wl, vals)?;
+    Ok(sp.with_extrapolation(if kind == SpectrumKind::Illuminant { Extrapolation::Zero } else { Extrapolation::Clamp }))
 }
 
 /// CIE Y of a spectrum relative to the equal-energy white's (∫ȳ·s / ∫ȳ), 360–830 nm.
 pub fn luminance_y(s: &Spectrum) -> f64 {
     let grid = WavelengthGrid { start_nm: 360.0, step_nm: 1.0, count: 471 };
     let y = &crate::spectrum::library::cie1931_cmfs()[1];
-    let one = Spectrum::constant("one", 1.0);
-    s.integrate_product(y, &grid) / one.integrate_product(y, &grid)
+    static ONE: std::sync::OnceLock<f64> = std::sync::OnceLock::new();
+    let one = *ONE.get_or_init(|| Spectrum::constant("one", 1.0).integrate_product(y, &grid));
+    s.integrate_product(y, &grid) / one
 }
 
 fn normalized_illuminant(lib: &str, name: &str) -> Spectrum {
@@ -503,21 +505,21 @@ mod tests {
 
     #[test]
     fn rgb_basis_is_bounded_and_grey_preserving() {
-        let g = rgb_to_spectrum([0.3, 0.3, 0.3], SpectrumKind::Albedo, "g");
+        let g = rgb_to_spectrum([0.3, 0.3, 0.3], SpectrumKind::Albedo, "g").unwrap();
         assert!(g.values.iter().all(|v| (v - 0.3).abs() < 1e-12));
-        let red = rgb_to_spectrum([1.0, 0.0, 0.0], SpectrumKind::Albedo, "r");
+        let red = rgb_to_spectrum([1.0, 0.0, 0.0], SpectrumKind::Albedo, "r").unwrap();
         assert!(red.eval(700.0) > 0.99 && red.eval(420.0) < 1e-3);
-        let blue = rgb_to_spectrum([0.0, 0.0, 1.0], SpectrumKind::Albedo, "b");
+        let blue = rgb_to_spectrum([0.0, 0.0, 1.0], SpectrumKind::Albedo, "b").unwrap();
         assert!(blue.eval(420.0) > 0.99 && blue.eval(650.0) < 1e-3);
         for rgb in [[1.0, 1.0, 0.0], [0.0, 1.0, 1.0], [1.0, 0.0, 1.0], [1.0, 1.0, 1.0]] {
-            let s = rgb_to_spectrum(rgb, SpectrumKind::Albedo, "x");
+            let s = rgb_to_spectrum(rgb, SpectrumKind::Albedo, "x").unwrap();
             assert!(s.values.iter().all(|&v| (0.0..=1.0 + 1e-12).contains(&v)));
         }
     }
 
     #[test]
     fn illuminant_white_has_unit_luminance() {
-        let w = rgb_to_spectrum([1.0, 1.0, 1.0], SpectrumKind::Illuminant, "w");
+        let w = rgb_to_spectrum([1.0, 1.0, 1.0], SpectrumKind::Illuminant, "w").unwrap();
         // ∫ȳ·D65/Y(D65) = 1 by construction; 1 nm vs 5 nm sampling limits agreement to ~1e-3.
         assert!((luminance_y(&w) - 1.0).abs() < 2e-3, "{}", luminance_y(&w));
     }

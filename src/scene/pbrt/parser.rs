@@ -284,7 +284,7 @@ impl Parser {
             };
             let Some((ty, v3_alias)) = ParamType::parse(ty_s) else {
                 let mut e = SpanError::new(t.span, format!("unknown parameter type '{ty_s}'"));
-                e.help = crate::diag::did_you_mean(ty_s, TYPE_NAMES.iter().copied()).map(|s| format!("did you mean '{s}'?"));
+                e.help = suggest(ty_s, TYPE_NAMES.iter().copied()).map(|s| format!("did you mean '{s}'?"));
                 return Err(e);
             };
             if v3_alias && ty_s == "color" {
@@ -742,7 +742,7 @@ impl Parser {
                 }
                 let Some(meshes) = self.objects.get(&name) else {
                     let mut e = SpanError::new(nspan, format!("unknown object '{name}'"));
-                    e.help = crate::diag::did_you_mean(&name, self.objects.keys().map(|s| s.as_str()))
+                    e.help = suggest(&name, self.objects.keys().map(|s| s.as_str()))
                         .map(|s| format!("did you mean '{s}'?"));
                     return Err(e);
                 };
@@ -754,7 +754,7 @@ impl Parser {
             }
             _ => {
                 let mut e = SpanError::new(span, format!("unknown directive '{d}'"));
-                e.help = crate::diag::did_you_mean(d, DIRECTIVES.iter().copied()).map(|s| format!("did you mean '{s}'?"));
+                e.help = suggest(d, DIRECTIVES.iter().copied()).map(|s| format!("did you mean '{s}'?"));
                 return Err(e);
             }
         }
@@ -911,7 +911,7 @@ impl Parser {
         }
         if let Some((name, span)) = self.pending_materials.iter().next() {
             let mut e = SpanError::new(*span, format!("named material '{name}' is used but never defined"));
-            e.help = crate::diag::did_you_mean(name, self.defined_materials.iter().map(|s| s.as_str()))
+            e.help = suggest(name, self.defined_materials.iter().map(|s| s.as_str()))
                 .map(|s| format!("did you mean '{s}'?"));
             return Err(e);
         }
@@ -944,4 +944,13 @@ pub fn read_source(path: &Path) -> Result<String, String> {
         Ok(s) => s,
         Err(e) => String::from_utf8_lossy(e.as_bytes()).into_owned(),
     })
+}
+
+/// `diag::did_you_mean`, skipped for long words (no useful suggestion, and the
+/// string metrics are quadratic in the length).
+fn suggest<'a>(word: &str, candidates: impl IntoIterator<Item = &'a str>) -> Option<String> {
+    if word.len() > 40 {
+        return None;
+    }
+    crate::diag::did_you_mean(word, candidates)
 }

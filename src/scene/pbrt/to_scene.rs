@@ -368,8 +368,11 @@ fn photometric(s: &Spectrum) -> f64 {
 }
 
 fn luminance_y_of_one() -> f64 {
-    let grid = crate::spectrum::WavelengthGrid { start_nm: 360.0, step_nm: 1.0, count: 471 };
-    Spectrum::constant("one", 1.0).integrate_product(&crate::spectrum::library::cie1931_cmfs()[1], &grid)
+    static Y: std::sync::OnceLock<f64> = std::sync::OnceLock::new();
+    *Y.get_or_init(|| {
+        let grid = crate::spectrum::WavelengthGrid { start_nm: 360.0, step_nm: 1.0, count: 471 };
+        Spectrum::constant("one", 1.0).integrate_product(&crate::spectrum::library::cie1931_cmfs()[1], &grid)
+    })
 }
 
 /// An emission spectrum normalised as pbrt-v4 does (see module docs), times `scale`.
@@ -377,7 +380,7 @@ fn emission(p: &ParamList, name: &str, scale: f64, ctx: &mut Ctx, tspan: Span) -
     let is_rgb = p.params.iter().any(|q| q.name == name && q.ty == ParamType::Rgb);
     let s = match p.spectrum(name, SpectrumKind::Illuminant, ctx)? {
         Some(s) => s,
-        None => super::params::rgb_to_spectrum([1.0, 1.0, 1.0], SpectrumKind::Illuminant, name),
+        None => super::params::rgb_to_spectrum([1.0, 1.0, 1.0], SpectrumKind::Illuminant, name).expect("finite white"),
     };
     let norm = if is_rgb || !p.has(name) { luminance_y_of_one() } else { photometric(&s) };
     if !(norm > 0.0) {
