@@ -22,13 +22,49 @@ impl XorShift {
 
 const BYTES: &[u8] = b"\"[]#\\\n 0123456789.-+eEabcxyzPN";
 const WORDS: &[&str] = &[
-    "Shape", "AttributeBegin", "AttributeEnd", "ObjectBegin \"o\"", "ObjectEnd", "ObjectInstance \"o\"", "WorldBegin",
-    "Include", "Translate 1 2 3", "Scale 0 0 0", "Rotate 90 0 0 0", "LookAt 0 0 0 0 0 0 0 1 0", "ReverseOrientation",
-    "TransformBegin", "TransformEnd", "Camera \"perspective\"", "[", "]", "\"", "1e308", "-1e308", "1e-320", "9e15",
-    "-0", "\"float radius\"", "\"integer indices\"", "\"point3 P\"", "\"rgb L\"", "\"spectrum eta\"", "\"blackbody L\"",
-    "\"string type\"", "#ObjectName X:", "NamedMaterial \"a\"", "MakeNamedMaterial \"a\"", "\"loopsubdiv\"",
-    "\"integer levels\" 40", "CoordSysTransform \"camera\"", "ActiveTransform EndTime", "Texture \"t\" \"spectrum\" \"constant\"",
-    "\"texture reflectance\" \"t\"", "AreaLightSource \"diffuse\"", "\"float power\" 1e300", "\"bool twosided\" true",
+    "Shape",
+    "AttributeBegin",
+    "AttributeEnd",
+    "ObjectBegin \"o\"",
+    "ObjectEnd",
+    "ObjectInstance \"o\"",
+    "WorldBegin",
+    "Include",
+    "Translate 1 2 3",
+    "Scale 0 0 0",
+    "Rotate 90 0 0 0",
+    "LookAt 0 0 0 0 0 0 0 1 0",
+    "ReverseOrientation",
+    "TransformBegin",
+    "TransformEnd",
+    "Camera \"perspective\"",
+    "[",
+    "]",
+    "\"",
+    "1e308",
+    "-1e308",
+    "1e-320",
+    "9e15",
+    "-0",
+    "\"float radius\"",
+    "\"integer indices\"",
+    "\"point3 P\"",
+    "\"rgb L\"",
+    "\"spectrum eta\"",
+    "\"blackbody L\"",
+    "\"string type\"",
+    "#ObjectName X:",
+    "NamedMaterial \"a\"",
+    "MakeNamedMaterial \"a\"",
+    "\"loopsubdiv\"",
+    "\"integer levels\" 40",
+    "CoordSysTransform \"camera\"",
+    "ActiveTransform EndTime",
+    "Texture \"t\" \"spectrum\" \"constant\"",
+    "\"texture reflectance\" \"t\"",
+    "AreaLightSource \"diffuse\"",
+    "\"float power\" 1e300",
+    "\"bool twosided\" true",
 ];
 
 fn corpus() -> Vec<(PathBuf, Vec<u8>)> {
@@ -36,7 +72,11 @@ fn corpus() -> Vec<(PathBuf, Vec<u8>)> {
     let mut files = vec![];
     for sub in ["", "bad", "inc"] {
         let d = dir.join(sub);
-        let mut names: Vec<_> = std::fs::read_dir(&d).unwrap().filter_map(|e| e.ok()).map(|e| e.path()).collect();
+        let mut names: Vec<_> = std::fs::read_dir(&d)
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .map(|e| e.path())
+            .collect();
         names.sort();
         for p in names {
             if p.extension().is_some_and(|e| e == "pbrt") {
@@ -106,7 +146,10 @@ fn one_hundred_thousand_mutations_no_panic_none_slow() {
         match r {
             Ok(true) => ok += 1,
             Ok(false) => err += 1,
-            Err(_) => panic!("parser panicked on mutation {k} of {}:\n{text}", path.display()),
+            Err(_) => panic!(
+                "parser panicked on mutation {k} of {}:\n{text}",
+                path.display()
+            ),
         }
         if dt > worst.0 {
             worst = (dt, text);
@@ -117,6 +160,14 @@ fn one_hundred_thousand_mutations_no_panic_none_slow() {
         t0.elapsed().as_secs_f64(),
         worst.0.as_secs_f64() * 1e3
     );
-    assert!(worst.0 < Duration::from_secs(1), "slowest input took {:?}:\n{}", worst.0, worst.1);
-    assert!(ok > 1000 && err > 1000, "mutations should both keep and break files ({ok} ok, {err} errors)");
+    assert!(
+        worst.0 < Duration::from_secs(1),
+        "slowest input took {:?}:\n{}",
+        worst.0,
+        worst.1
+    );
+    assert!(
+        ok > 1000 && err > 1000,
+        "mutations should both keep and break files ({ok} ok, {err} errors)"
+    );
 }

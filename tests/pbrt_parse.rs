@@ -2,7 +2,9 @@
 //! malformed files, and the shipped scenes. Expected values are worked out by
 //! hand from the files (comments there), never computed by the parser.
 
-use camsim::scene::pbrt::{LoadOptions, LoadedScene, info_json, load_full, paper::apply_paper_spectra, world_bounds};
+use camsim::scene::pbrt::{
+    LoadOptions, LoadedScene, info_json, load_full, paper::apply_paper_spectra, world_bounds,
+};
 use camsim::scene::{CameraModel, Light, Material, Mesh, Scene};
 use camsim::spectrum::{Spectrum, WavelengthGrid, library};
 use glam::DVec3;
@@ -41,7 +43,7 @@ fn tri_normal(m: &Mesh, t: usize) -> DVec3 {
     (pb - pa).cross(pc - pa).normalize()
 }
 
-fn mat<'a>(s: &'a Scene, id: u32) -> &'a Material {
+fn mat(s: &Scene, id: u32) -> &Material {
     &s.materials[id as usize].material
 }
 
@@ -51,7 +53,11 @@ fn obj(s: &Scene, id: u32) -> &str {
 
 /// ∫ȳ(λ)S(λ)dλ, 360–830 nm at 1 nm (ȳ peaks at 1): pbrt's photometric integral.
 fn y_integral(s: &Spectrum) -> f64 {
-    let grid = WavelengthGrid { start_nm: 360.0, step_nm: 1.0, count: 471 };
+    let grid = WavelengthGrid {
+        start_nm: 360.0,
+        step_nm: 1.0,
+        count: 471,
+    };
     s.integrate_product(&library::cie1931_cmfs()[1], &grid)
 }
 
@@ -62,7 +68,10 @@ fn c01_minimal() {
     assert_eq!(s.meshes.len(), 1);
     assert_eq!(s.triangle_count(), 1);
     let cam = s.camera.as_ref().unwrap();
-    close(cam.to_world.transform_point3(DVec3::ZERO), DVec3::new(0.0, 0.0, -5.0));
+    close(
+        cam.to_world.transform_point3(DVec3::ZERO),
+        DVec3::new(0.0, 0.0, -5.0),
+    );
     close(cam.to_world.transform_vector3(DVec3::Z), DVec3::Z);
     assert!(matches!(cam.model, CameraModel::Pinhole { fov_deg, .. } if fov_deg == 45.0));
     let f = s.film.as_ref().unwrap();
@@ -105,8 +114,14 @@ fn c04_transform_is_column_major() {
 fn c05_lookat_camera() {
     let s = load("05_lookat_camera.pbrt").scene;
     let cam = s.camera.as_ref().unwrap();
-    close(cam.to_world.transform_point3(DVec3::ZERO), DVec3::new(1.0, 2.0, -5.0));
-    close(cam.to_world.transform_point3(DVec3::Z), DVec3::new(1.0, 2.0, -4.0));
+    close(
+        cam.to_world.transform_point3(DVec3::ZERO),
+        DVec3::new(1.0, 2.0, -5.0),
+    );
+    close(
+        cam.to_world.transform_point3(DVec3::Z),
+        DVec3::new(1.0, 2.0, -4.0),
+    );
     close(cam.to_world.transform_vector3(DVec3::Y), DVec3::Y);
     close(cam.to_world.transform_vector3(DVec3::X), DVec3::X);
     assert!(matches!(cam.model, CameraModel::Pinhole { fov_deg, .. } if fov_deg == 30.0));
@@ -129,7 +144,11 @@ fn c07_active_transform() {
     close(vtx(&s.meshes[0], 0), DVec3::ZERO);
     close(vtx(&s.meshes[1], 0), DVec3::new(1.0, 0.0, 0.0));
     assert_eq!(s.warnings.len(), 1, "{:?}", s.warnings);
-    assert!(s.warnings[0].contains("animated") && s.warnings[0].contains(":7:"), "{:?}", s.warnings);
+    assert!(
+        s.warnings[0].contains("animated") && s.warnings[0].contains(":7:"),
+        "{:?}",
+        s.warnings
+    );
 }
 
 #[test]
@@ -171,10 +190,21 @@ fn c10_pbrt_v3_forms_warn_and_map() {
     let f = s.film.as_ref().unwrap();
     assert_eq!((f.width_px, f.height_px), (100, 50));
     let w = s.warnings.join("\n");
-    for needle in ["'image'", "directlighting", "'matte'", "'color'", "TransformBegin", "TransformEnd", "WorldEnd"] {
+    for needle in [
+        "'image'",
+        "directlighting",
+        "'matte'",
+        "'color'",
+        "TransformBegin",
+        "TransformEnd",
+        "WorldEnd",
+    ] {
         assert!(w.contains(needle), "missing warning {needle}: {w}");
     }
-    assert!(matches!(mat(&s, s.meshes[0].material), Material::Diffuse { .. }));
+    assert!(matches!(
+        mat(&s, s.meshes[0].material),
+        Material::Diffuse { .. }
+    ));
     let e = load_strict("10_v3_forms.pbrt").unwrap_err().to_string();
     assert!(e.contains("10_v3_forms.pbrt:1:7"), "{e}");
 }
@@ -198,10 +228,16 @@ fn c12_material_mapping() {
     let s = load("12_materials.pbrt").scene;
     let m: Vec<&Material> = s.spheres.iter().map(|x| mat(&s, x.material)).collect();
     assert_eq!(m.len(), 7);
-    assert!(matches!(m[0], Material::Diffuse { reflectance } if (reflectance.eval(500.0) - 0.5).abs() < 1e-12));
+    assert!(
+        matches!(m[0], Material::Diffuse { reflectance } if (reflectance.eval(500.0) - 0.5).abs() < 1e-12)
+    );
     match m[1] {
         // coating F0 = ((1.5−1)/(1.5+1))² = 0.04; α = sqrt(0.04) = 0.2
-        Material::DiffuseSpecular { diffuse, specular, roughness } => {
+        Material::DiffuseSpecular {
+            diffuse,
+            specular,
+            roughness,
+        } => {
             near(diffuse.eval(600.0), 0.3, 1e-12);
             near(specular.eval(600.0), 0.04, 1e-12);
             near(*roughness, 0.2, 1e-12);
@@ -218,7 +254,9 @@ fn c12_material_mapping() {
     }
     assert!(matches!(m[3], Material::Dielectric { ior } if (ior.eval(500.0) - 1.33).abs() < 1e-12));
     // Schott N-BK7 n_d = 1.5168 at 587.6 nm
-    assert!(matches!(m[4], Material::Dielectric { ior } if (ior.eval(587.6) - 1.5168).abs() < 5e-4));
+    assert!(
+        matches!(m[4], Material::Dielectric { ior } if (ior.eval(587.6) - 1.5168).abs() < 5e-4)
+    );
     match m[5] {
         // k = 2·sqrt(R/(1−R)) = 2·sqrt(4) = 4 with η = 1: R = k²/(4+k²) = 0.8
         Material::Conductor { eta, k, .. } => {
@@ -234,7 +272,11 @@ fn c12_material_mapping() {
 fn c13_uber_and_plastic() {
     let s = load("13_uber.pbrt").scene;
     match mat(&s, s.spheres[0].material) {
-        Material::DiffuseSpecular { diffuse, specular, roughness } => {
+        Material::DiffuseSpecular {
+            diffuse,
+            specular,
+            roughness,
+        } => {
             near(diffuse.eval(550.0), 0.4, 1e-12);
             near(specular.eval(550.0), 0.1, 1e-12);
             // pbrt-v3 RoughnessToAlpha(0.1), evaluated by hand: 0.46176
@@ -256,7 +298,11 @@ fn c14_area_lights_with_power_and_scale() {
     let s = &l.scene;
     let e = s.meshes[0].emission.as_ref().unwrap();
     // power Φ = 10 over a one-sided 2 m² emitter: ∫ȳL = Φ/(π·A)
-    near(y_integral(&e.radiance), 10.0 / (std::f64::consts::PI * 2.0), 1e-6);
+    near(
+        y_integral(&e.radiance),
+        10.0 / (std::f64::consts::PI * 2.0),
+        1e-6,
+    );
     let e = s.spheres[0].emission.as_ref().unwrap();
     assert!(e.two_sided);
     // rgb L (2,2,2) × scale 3, normalised to the white's luminance: ∫ȳL = 6
@@ -270,14 +316,23 @@ fn c15_lights_through_transforms() {
     let s = load("15_lights.pbrt").scene;
     assert_eq!(s.lights.len(), 5);
     match &s.lights[0] {
-        Light::Point { position, intensity } => {
+        Light::Point {
+            position,
+            intensity,
+        } => {
             close(*position, DVec3::new(1.0, 10.0, 0.0));
             near(y_integral(intensity), 2.0, 1e-6);
         }
         l => panic!("{l:?}"),
     }
     match &s.lights[1] {
-        Light::Spot { position, direction, cone_angle_deg, falloff_start_deg, intensity } => {
+        Light::Spot {
+            position,
+            direction,
+            cone_angle_deg,
+            falloff_start_deg,
+            intensity,
+        } => {
             close(*position, DVec3::new(0.0, 10.0, 0.0));
             close(*direction, -DVec3::Y);
             near(*cone_angle_deg, 40.0, 1e-12);
@@ -289,7 +344,10 @@ fn c15_lights_through_transforms() {
         l => panic!("{l:?}"),
     }
     match &s.lights[2] {
-        Light::Distant { direction, irradiance } => {
+        Light::Distant {
+            direction,
+            irradiance,
+        } => {
             close(*direction, -DVec3::Y);
             near(y_integral(irradiance), 7.0, 1e-6);
         }
@@ -306,7 +364,13 @@ fn c15_lights_through_transforms() {
 #[test]
 fn c16_spectrum_forms() {
     let s = load("16_spectrum_types.pbrt").scene;
-    let refl = |name: &str| match &s.materials.iter().find(|m| m.name == name).unwrap().material {
+    let refl = |name: &str| match &s
+        .materials
+        .iter()
+        .find(|m| m.name == name)
+        .unwrap()
+        .material
+    {
         Material::Diffuse { reflectance } => reflectance.clone(),
         m => panic!("{m:?}"),
     };
@@ -314,7 +378,11 @@ fn c16_spectrum_forms() {
     near(refl("file").eval(550.0), 0.625, 1e-12);
     let mini = library::named("mcc-mini-04").unwrap();
     near(refl("shipped").eval(552.0), mini.eval(552.0), 1e-12);
-    assert!(s.warnings.iter().any(|w| w.contains("metal-Cu-eta")), "{:?}", s.warnings);
+    assert!(
+        s.warnings.iter().any(|w| w.contains("metal-Cu-eta")),
+        "{:?}",
+        s.warnings
+    );
     let e = s.disks[0].emission.as_ref().unwrap();
     near(y_integral(&e.radiance), 1.0, 1e-6);
     // illuminant A rises towards red
@@ -341,7 +409,9 @@ fn c18_include_at_token_level_and_relative_paths() {
 #[test]
 fn c19_import() {
     let s = load("19_import.pbrt").scene;
-    assert!(matches!(mat(&s, s.spheres[0].material), Material::Dielectric { ior } if (ior.eval(500.0) - 1.7).abs() < 1e-12));
+    assert!(
+        matches!(mat(&s, s.spheres[0].material), Material::Dielectric { ior } if (ior.eval(500.0) - 1.7).abs() < 1e-12)
+    );
     near(s.spheres[0].radius, 3.0, 1e-12);
 }
 
@@ -359,8 +429,18 @@ fn c21_object_instances() {
     assert_eq!(l.prototypes.len(), 2);
     assert!(s.spheres.is_empty());
     close(vtx(&s.meshes[0], 0), DVec3::new(0.0, 1.0, 0.0));
-    close(s.instances[0].to_world.transform_point3(vtx(&s.meshes[0], 0)), DVec3::new(10.0, 1.0, 0.0));
-    close(s.instances[1].to_world.transform_point3(vtx(&s.meshes[0], 0)), DVec3::new(-10.0, 2.0, 0.0));
+    close(
+        s.instances[0]
+            .to_world
+            .transform_point3(vtx(&s.meshes[0], 0)),
+        DVec3::new(10.0, 1.0, 0.0),
+    );
+    close(
+        s.instances[1]
+            .to_world
+            .transform_point3(vtx(&s.meshes[0], 0)),
+        DVec3::new(-10.0, 2.0, 0.0),
+    );
     assert_eq!(obj(s, s.meshes[0].object), "thing");
     let (lo, hi) = world_bounds(s, &l.prototypes).unwrap();
     near(lo.x, -11.0, 1e-6);
@@ -394,7 +474,10 @@ fn c24_plymesh() {
     let s = load("24_plymesh.pbrt").scene;
     assert_eq!(s.triangle_count(), 2);
     close(vtx(&s.meshes[0], 2), DVec3::new(3.0, 3.0, 0.0));
-    assert_eq!(s.meshes[0].uvs.as_ref().unwrap()[2], glam::Vec2::new(1.0, 1.0));
+    assert_eq!(
+        s.meshes[0].uvs.as_ref().unwrap()[2],
+        glam::Vec2::new(1.0, 1.0)
+    );
 }
 
 #[test]
@@ -415,7 +498,11 @@ fn c26_thin_lens_and_crop() {
     near(f.pixel_pitch_m, 1e-4, 1e-15);
     assert_eq!(f.crop_window, Some([0.25, 0.75, 0.0, 0.5]));
     match &s.camera.as_ref().unwrap().model {
-        CameraModel::ThinLens { focal_length_m, f_number, focus_distance_m } => {
+        CameraModel::ThinLens {
+            focal_length_m,
+            f_number,
+            focus_distance_m,
+        } => {
             // shorter side 30 mm, fov 40°: f = 15 mm / tan 20° = 41.2122 mm; N = f/(2·1 mm)
             near(*focal_length_m, 0.015 / 20f64.to_radians().tan(), 1e-12);
             near(*focal_length_m, 0.0412122, 1e-7);
@@ -430,7 +517,12 @@ fn c26_thin_lens_and_crop() {
 fn c27_realistic_camera() {
     let s = load("27_realistic.pbrt").scene;
     match &s.camera.as_ref().unwrap().model {
-        CameraModel::LensFile { path, aperture_diameter_m, focus_distance_m, film_distance_m } => {
+        CameraModel::LensFile {
+            path,
+            aperture_diameter_m,
+            focus_distance_m,
+            film_distance_m,
+        } => {
             assert_eq!(path, &dir().join("lenses/wide.22mm.dat"));
             assert_eq!(*aperture_diameter_m, Some(0.004));
             assert_eq!(*focus_distance_m, Some(0.5));
@@ -443,7 +535,10 @@ fn c27_realistic_camera() {
 #[test]
 fn c28_strings_comments_numbers() {
     let s = load("28_strings_numbers.pbrt").scene;
-    assert_eq!(s.materials[s.meshes[0].material as usize].name, "say \"hi\"\\");
+    assert_eq!(
+        s.materials[s.meshes[0].material as usize].name,
+        "say \"hi\"\\"
+    );
     close(vtx(&s.meshes[0], 0), DVec3::new(1.0, -0.5, 1.0));
     close(vtx(&s.meshes[0], 1), DVec3::new(5.0, 0.25, 0.0));
     close(vtx(&s.meshes[0], 2), DVec3::new(0.0, 1.0, 0.0));
@@ -454,10 +549,23 @@ fn c29_last_duplicate_wins_and_unused_warns() {
     let s = load("29_duplicates_unused.pbrt").scene;
     near(s.spheres[0].radius, 3.0, 1e-12);
     assert_eq!(s.warnings.len(), 2, "{:?}", s.warnings);
-    assert!(s.warnings.iter().any(|w| w.contains("given twice") && w.contains(":2:17:")));
-    assert!(s.warnings.iter().any(|w| w.contains("'nosuchparam' is not used") && w.contains(":2:59:")));
-    let e = load_strict("29_duplicates_unused.pbrt").unwrap_err().to_string();
-    assert!(e.contains("29_duplicates_unused.pbrt:2:17") && e.contains("--strict"), "{e}");
+    assert!(
+        s.warnings
+            .iter()
+            .any(|w| w.contains("given twice") && w.contains(":2:17:"))
+    );
+    assert!(
+        s.warnings
+            .iter()
+            .any(|w| w.contains("'nosuchparam' is not used") && w.contains(":2:59:"))
+    );
+    let e = load_strict("29_duplicates_unused.pbrt")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("29_duplicates_unused.pbrt:2:17") && e.contains("--strict"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -478,14 +586,21 @@ fn c31_render_options_and_media() {
     assert_eq!(s.spheres.len(), 1);
     assert_eq!(s.warnings.len(), 2, "{:?}", s.warnings);
     assert!(s.warnings.iter().any(|w| w.contains("'fog'")));
-    assert!(s.warnings.iter().any(|w| w.contains("MediumInterface") && w.contains(":10:")));
+    assert!(
+        s.warnings
+            .iter()
+            .any(|w| w.contains("MediumInterface") && w.contains(":10:"))
+    );
 }
 
 #[test]
 fn c32_object_labels() {
     let s = load("32_labels.pbrt").scene;
     let names: Vec<&str> = s.spheres.iter().map(|x| obj(&s, x.object)).collect();
-    assert_eq!(names, vec!["shape0", "Chart/Patch01/white", "Chart", "white"]);
+    assert_eq!(
+        names,
+        vec!["shape0", "Chart/Patch01/white", "Chart", "white"]
+    );
 }
 
 #[test]
@@ -500,23 +615,68 @@ fn c33_attribute_defaults() {
 #[test]
 fn malformed_files_give_located_errors() {
     let cases = [
-        ("bad/unterminated_string.pbrt", "unterminated_string.pbrt:2:16", "unterminated string"),
-        ("bad/missing_bracket.pbrt", "missing_bracket.pbrt:3:1", "missing ']'"),
-        ("bad/wrong_param_type.pbrt", "wrong_param_type.pbrt:3:21", "expects numbers"),
-        ("bad/unknown_directive.pbrt", "unknown_directive.pbrt:2:3", "did you mean 'Shape'"),
+        (
+            "bad/unterminated_string.pbrt",
+            "unterminated_string.pbrt:2:16",
+            "unterminated string",
+        ),
+        (
+            "bad/missing_bracket.pbrt",
+            "missing_bracket.pbrt:3:1",
+            "missing ']'",
+        ),
+        (
+            "bad/wrong_param_type.pbrt",
+            "wrong_param_type.pbrt:3:21",
+            "expects numbers",
+        ),
+        (
+            "bad/unknown_directive.pbrt",
+            "unknown_directive.pbrt:2:3",
+            "did you mean 'Shape'",
+        ),
         ("bad/cycle_a.pbrt", "cycle_b.pbrt:2:12", "include cycle"),
-        ("bad/missing_include.pbrt", "missing_include.pbrt:3:10", "does_not_exist.pbrt"),
-        ("bad/shape_before_world.pbrt", "shape_before_world.pbrt:2:4", "only allowed after WorldBegin"),
-        ("bad/unknown_type.pbrt", "unknown_type.pbrt:2:38", "did you mean 'float'"),
-        ("bad/index_out_of_range.pbrt", "index_out_of_range.pbrt:2:56", "out of range"),
-        ("bad/undefined_material.pbrt", "undefined_material.pbrt:2:16", "never defined"),
-        ("bad/unmatched_end.pbrt", "unmatched_end.pbrt:2:1", "without a matching begin"),
+        (
+            "bad/missing_include.pbrt",
+            "missing_include.pbrt:3:10",
+            "does_not_exist.pbrt",
+        ),
+        (
+            "bad/shape_before_world.pbrt",
+            "shape_before_world.pbrt:2:4",
+            "only allowed after WorldBegin",
+        ),
+        (
+            "bad/unknown_type.pbrt",
+            "unknown_type.pbrt:2:38",
+            "did you mean 'float'",
+        ),
+        (
+            "bad/index_out_of_range.pbrt",
+            "index_out_of_range.pbrt:2:56",
+            "out of range",
+        ),
+        (
+            "bad/undefined_material.pbrt",
+            "undefined_material.pbrt:2:16",
+            "never defined",
+        ),
+        (
+            "bad/unmatched_end.pbrt",
+            "unmatched_end.pbrt:2:1",
+            "without a matching begin",
+        ),
     ];
     for (file, loc, msg) in cases {
-        let e = load_full(&dir().join(file), &LoadOptions::default()).err().unwrap_or_else(|| panic!("{file} parsed"));
+        let e = load_full(&dir().join(file), &LoadOptions::default())
+            .err()
+            .unwrap_or_else(|| panic!("{file} parsed"));
         let t = e.to_string();
         assert!(t.contains(loc) && t.contains(msg), "{file}: {t}");
-        assert!(matches!(e, camsim::Error::Located(_)), "{file}: not located");
+        assert!(
+            matches!(e, camsim::Error::Located(_)),
+            "{file}: not located"
+        );
     }
     // A wrong type at lookup (a string where a float is read) is an error too.
     let e = camsim::scene::pbrt::parse_text(
@@ -526,7 +686,10 @@ fn malformed_files_give_located_errors() {
     )
     .unwrap_err()
     .to_string();
-    assert!(e.contains("inline.pbrt:2:17") && e.contains("expected float"), "{e}");
+    assert!(
+        e.contains("inline.pbrt:2:17") && e.contains("expected float"),
+        "{e}"
+    );
 }
 
 fn scenes() -> PathBuf {
@@ -535,7 +698,11 @@ fn scenes() -> PathBuf {
 
 #[test]
 fn shipped_cornell_box_parses() {
-    let l = load_full(&scenes().join("CornellBoxReference/CornellBoxReference.pbrt"), &LoadOptions::default()).unwrap();
+    let l = load_full(
+        &scenes().join("CornellBoxReference/CornellBoxReference.pbrt"),
+        &LoadOptions::default(),
+    )
+    .unwrap();
     let s = &l.scene;
     assert_eq!(s.meshes.len(), 10);
     assert_eq!(s.triangle_count(), 72);
@@ -546,14 +713,33 @@ fn shipped_cornell_box_parses() {
     close(lo, DVec3::new(-0.15, 0.0, -0.15));
     close(hi, DVec3::new(0.15, 0.30505, 0.15));
     let cam = s.camera.as_ref().unwrap();
-    close(cam.to_world.transform_point3(DVec3::ZERO), DVec3::new(0.0, 0.125, -0.4));
+    close(
+        cam.to_world.transform_point3(DVec3::ZERO),
+        DVec3::new(0.0, 0.125, -0.4),
+    );
     let names: Vec<&str> = s.objects.iter().map(|o| o.name.as_str()).collect();
-    for n in ["Box/LeftWall", "Box/RightWall", "CubeSmall", "CubeLarge", "AreaLight/areaLightMat"] {
+    for n in [
+        "Box/LeftWall",
+        "Box/RightWall",
+        "CubeSmall",
+        "CubeLarge",
+        "AreaLight/areaLightMat",
+    ] {
         assert!(names.contains(&n), "{names:?}");
     }
     // Left wall (red) is at x = −0.1497 as cornellbox_setup.json says (−0.149722389736 in the file).
-    let left = s.meshes.iter().find(|m| obj(s, m.object) == "Box/LeftWall").unwrap();
-    assert!(left.positions.iter().all(|p| (p.x as f64 + 0.149722389736).abs() < 1e-6), "{:?}", left.positions);
+    let left = s
+        .meshes
+        .iter()
+        .find(|m| obj(s, m.object) == "Box/LeftWall")
+        .unwrap();
+    assert!(
+        left.positions
+            .iter()
+            .all(|p| (p.x as f64 + 0.149722389736).abs() < 1e-6),
+        "{:?}",
+        left.positions
+    );
 }
 
 #[test]
@@ -566,18 +752,39 @@ fn shipped_mcc_and_bitterli_parse() {
     // 8.4 × 5.6 cm chart centred at y = 0.028 m
     close(lo, DVec3::new(-0.042, 0.0, -0.0025));
     close(hi, DVec3::new(0.042, 0.056, 0.005));
-    let b = load_full(&scenes().join("pbrt-v4/bitterli-cornell-box.pbrt"), &LoadOptions { strict: true }).unwrap();
+    let b = load_full(
+        &scenes().join("pbrt-v4/bitterli-cornell-box.pbrt"),
+        &LoadOptions { strict: true },
+    )
+    .unwrap();
     assert_eq!(b.scene.meshes.len(), 8);
     assert_eq!(b.scene.triangle_count(), 36);
-    assert_eq!(b.scene.meshes.iter().filter(|m| m.emission.is_some()).count(), 1);
-    let light = b.scene.meshes.iter().find(|m| m.emission.is_some()).unwrap();
+    assert_eq!(
+        b.scene
+            .meshes
+            .iter()
+            .filter(|m| m.emission.is_some())
+            .count(),
+        1
+    );
+    let light = b
+        .scene
+        .meshes
+        .iter()
+        .find(|m| m.emission.is_some())
+        .unwrap();
     // The ceiling light faces down (its normals say so).
     close(tri_normal(light, 0), -DVec3::Y);
 }
 
 #[test]
 fn paper_spectra_replace_placeholders() {
-    let mut s = load_full(&scenes().join("CornellBoxReference/CornellBoxReference.pbrt"), &LoadOptions::default()).unwrap().scene;
+    let mut s = load_full(
+        &scenes().join("CornellBoxReference/CornellBoxReference.pbrt"),
+        &LoadOptions::default(),
+    )
+    .unwrap()
+    .scene;
     let rep = apply_paper_spectra(&mut s).unwrap();
     assert_eq!(rep.lamp_meshes, 1);
     assert_eq!(rep.lights_removed, 1);
@@ -586,30 +793,54 @@ fn paper_spectra_replace_placeholders() {
     let white = library::named("cbox-white-wall").unwrap();
     let get = |n: &str| &s.materials.iter().find(|m| m.name == n).unwrap().material;
     match get("LeftWall") {
-        Material::DiffuseSpecular { diffuse, specular, .. } => {
+        Material::DiffuseSpecular {
+            diffuse, specular, ..
+        } => {
             near(diffuse.eval(650.0), red.eval(650.0), 1e-12);
             near(specular.eval(650.0), 0.1 * red.eval(650.0), 1e-12);
         }
         m => panic!("{m:?}"),
     }
     match get("CubeLarge") {
-        Material::DiffuseSpecular { specular, .. } => near(specular.eval(500.0), 0.5 * white.eval(500.0), 1e-12),
+        Material::DiffuseSpecular { specular, .. } => {
+            near(specular.eval(500.0), 0.5 * white.eval(500.0), 1e-12)
+        }
         m => panic!("{m:?}"),
     }
     assert!(matches!(get("BackWall"), Material::Diffuse { .. }));
     let lamp = s.meshes.iter().find(|m| m.emission.is_some()).unwrap();
-    near(lamp.emission.as_ref().unwrap().radiance.eval(615.0), library::named("cbox-lamp").unwrap().eval(615.0), 1e-15);
-    let ymax = lamp.positions.iter().map(|p| p.y as f64).fold(f64::MIN, f64::max);
+    near(
+        lamp.emission.as_ref().unwrap().radiance.eval(615.0),
+        library::named("cbox-lamp").unwrap().eval(615.0),
+        1e-15,
+    );
+    let ymax = lamp
+        .positions
+        .iter()
+        .map(|p| p.y as f64)
+        .fold(f64::MIN, f64::max);
     near(ymax, 0.30005, 1e-6);
 
-    let mut m = load_full(&scenes().join("mccCB/mccCB.pbrt"), &LoadOptions::default()).unwrap().scene;
+    let mut m = load_full(&scenes().join("mccCB/mccCB.pbrt"), &LoadOptions::default())
+        .unwrap()
+        .scene;
     let rep = apply_paper_spectra(&mut m).unwrap();
     assert_eq!(rep.materials_replaced.len(), 24);
-    let p4 = match &m.materials.iter().find(|x| x.name == "Patch04").unwrap().material {
+    let p4 = match &m
+        .materials
+        .iter()
+        .find(|x| x.name == "Patch04")
+        .unwrap()
+        .material
+    {
         Material::Diffuse { reflectance } => reflectance.eval(550.0),
         x => panic!("{x:?}"),
     };
-    near(p4, library::named("mcc-mini-04").unwrap().eval(550.0), 1e-12);
+    near(
+        p4,
+        library::named("mcc-mini-04").unwrap().eval(550.0),
+        1e-12,
+    );
     let mut empty = Scene::default();
     assert!(apply_paper_spectra(&mut empty).is_err());
 }
@@ -622,7 +853,11 @@ fn scene_info_cli_prints_json() {
         .arg("--strict")
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["triangles"], 36);
     assert_eq!(v["lights"], 1);

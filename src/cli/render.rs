@@ -28,6 +28,9 @@ pub struct BenchArgs {
 pub fn render(_a: RenderArgs) -> Result<i32> {
     Err(Error::NotSupported("render".into()))
 }
-pub fn bench(_a: BenchArgs) -> Result<i32> {
+pub fn bench(a: BenchArgs) -> Result<i32> {
+    if a.which == "parse" {
+        return super::scene::bench_parse();
+    }
     Err(Error::NotSupported("bench".into()))
 }

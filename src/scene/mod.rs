@@ -2,5 +2,6 @@
 
 pub mod model;
 pub mod pbrt;
+pub mod targets;
 
 pub use model::*;

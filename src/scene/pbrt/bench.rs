@@ -34,7 +34,11 @@ pub fn write_mesh_file(path: &std::path::Path, target_mb: f64) -> Result<u64> {
     let f = std::fs::File::create(path).map_err(|e| Error::io(path, e))?;
     let mut w = std::io::BufWriter::new(f);
     let io = |e| Error::io(path, e);
-    writeln!(w, "LookAt 0 0 -3  0 0 0  0 1 0\nCamera \"perspective\" \"float fov\" [45]\nWorldBegin").map_err(io)?;
+    writeln!(
+        w,
+        "LookAt 0 0 -3  0 0 0  0 1 0\nCamera \"perspective\" \"float fov\" [45]\nWorldBegin"
+    )
+    .map_err(io)?;
     write!(w, "Shape \"trianglemesh\" \"point3 P\" [").map_err(io)?;
     for j in 0..n {
         for i in 0..n {
@@ -48,7 +52,17 @@ pub fn write_mesh_file(path: &std::path::Path, target_mb: f64) -> Result<u64> {
     for j in 0..n - 1 {
         for i in 0..n - 1 {
             let a = j * n + i;
-            write!(w, " {} {} {} {} {} {}", a, a + 1, a + n + 1, a, a + n + 1, a + n).map_err(io)?;
+            write!(
+                w,
+                " {} {} {} {} {} {}",
+                a,
+                a + 1,
+                a + n + 1,
+                a,
+                a + n + 1,
+                a + n
+            )
+            .map_err(io)?;
         }
         writeln!(w).map_err(io)?;
     }

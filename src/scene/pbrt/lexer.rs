@@ -59,7 +59,10 @@ pub struct Lexer {
 }
 
 fn is_delim(b: u8) -> bool {
-    matches!(b, b' ' | b'\t' | b'\n' | b'\r' | b'\x0c' | b'\x0b' | b'"' | b'[' | b']' | b'#')
+    matches!(
+        b,
+        b' ' | b'\t' | b'\n' | b'\r' | b'\x0c' | b'\x0b' | b'"' | b'[' | b']' | b'#'
+    )
 }
 
 impl Lexer {
@@ -72,14 +75,23 @@ impl Lexer {
         let n = src.len();
         loop {
             // skip white space
-            while self.pos < n && matches!(src[self.pos], b' ' | b'\t' | b'\n' | b'\r' | b'\x0c' | b'\x0b') {
+            while self.pos < n
+                && matches!(
+                    src[self.pos],
+                    b' ' | b'\t' | b'\n' | b'\r' | b'\x0c' | b'\x0b'
+                )
+            {
                 self.pos += 1;
             }
             if self.pos >= n {
                 return Ok(None);
             }
             let start = self.pos;
-            let span = |s: usize, e: usize| Span { file: self.file, start: s, end: e };
+            let span = |s: usize, e: usize| Span {
+                file: self.file,
+                start: s,
+                end: e,
+            };
             match src[start] {
                 b'#' => {
                     let mut e = start;
@@ -105,18 +117,30 @@ impl Lexer {
                             b -= 1;
                         }
                         if b > a {
-                            return Ok(Some(Token { kind: TokenKind::NameHint, span: span(a, b), num: None }));
+                            return Ok(Some(Token {
+                                kind: TokenKind::NameHint,
+                                span: span(a, b),
+                                num: None,
+                            }));
                         }
                     }
                     continue;
                 }
                 b'[' => {
                     self.pos += 1;
-                    return Ok(Some(Token { kind: TokenKind::LBracket, span: span(start, start + 1), num: None }));
+                    return Ok(Some(Token {
+                        kind: TokenKind::LBracket,
+                        span: span(start, start + 1),
+                        num: None,
+                    }));
                 }
                 b']' => {
                     self.pos += 1;
-                    return Ok(Some(Token { kind: TokenKind::RBracket, span: span(start, start + 1), num: None }));
+                    return Ok(Some(Token {
+                        kind: TokenKind::RBracket,
+                        span: span(start, start + 1),
+                        num: None,
+                    }));
                 }
                 b'"' => {
                     let mut i = start + 1;
@@ -126,7 +150,8 @@ impl Lexer {
                             return Err(LexError {
                                 offset: start,
                                 len: 1,
-                                message: "unterminated string: end of file before the closing '\"'".into(),
+                                message: "unterminated string: end of file before the closing '\"'"
+                                    .into(),
                             });
                         }
                         match src[i] {
@@ -135,7 +160,9 @@ impl Lexer {
                                 return Err(LexError {
                                     offset: start,
                                     len: i - start,
-                                    message: "unterminated string: new line before the closing '\"'".into(),
+                                    message:
+                                        "unterminated string: new line before the closing '\"'"
+                                            .into(),
                                 });
                             }
                             b'\\' => {
@@ -144,11 +171,14 @@ impl Lexer {
                                     return Err(LexError {
                                         offset: start,
                                         len: 1,
-                                        message: "unterminated string: end of file after '\\'".into(),
+                                        message: "unterminated string: end of file after '\\'"
+                                            .into(),
                                     });
                                 }
                                 match src[i + 1] {
-                                    b'b' | b'f' | b'n' | b'r' | b't' | b'\\' | b'\'' | b'"' => i += 2,
+                                    b'b' | b'f' | b'n' | b'r' | b't' | b'\\' | b'\'' | b'"' => {
+                                        i += 2
+                                    }
                                     c => {
                                         return Err(LexError {
                                             offset: i,
@@ -165,7 +195,11 @@ impl Lexer {
                         }
                     }
                     self.pos = i + 1;
-                    return Ok(Some(Token { kind: TokenKind::Str { escaped }, span: span(start + 1, i), num: None }));
+                    return Ok(Some(Token {
+                        kind: TokenKind::Str { escaped },
+                        span: span(start + 1, i),
+                        num: None,
+                    }));
                 }
                 _ => {
                     let mut e = start;
@@ -175,11 +209,17 @@ impl Lexer {
                     self.pos = e;
                     let first = src[start];
                     let num = if first.is_ascii_digit() || matches!(first, b'+' | b'-' | b'.') {
-                        std::str::from_utf8(&src[start..e]).ok().and_then(parse_number)
+                        std::str::from_utf8(&src[start..e])
+                            .ok()
+                            .and_then(parse_number)
                     } else {
                         None
                     };
-                    return Ok(Some(Token { kind: TokenKind::Word, span: span(start, e), num }));
+                    return Ok(Some(Token {
+                        kind: TokenKind::Word,
+                        span: span(start, e),
+                        num,
+                    }));
                 }
             }
         }
@@ -191,7 +231,10 @@ impl Lexer {
 pub fn parse_number(s: &str) -> Option<f64> {
     let b = s.as_bytes();
     // Rust's parser accepts "inf"/"nan"/"infinity"; pbrt does not.
-    if !b.iter().all(|c| c.is_ascii_digit() || matches!(c, b'+' | b'-' | b'.' | b'e' | b'E')) {
+    if !b
+        .iter()
+        .all(|c| c.is_ascii_digit() || matches!(c, b'+' | b'-' | b'.' | b'e' | b'E'))
+    {
         return None;
     }
     let v: f64 = s.parse().ok()?;
@@ -262,7 +305,10 @@ mod tests {
         let mut l = Lexer::new(0);
         let t = l.next_token(src.as_bytes()).unwrap().unwrap();
         assert_eq!(t.kind, TokenKind::Str { escaped: true });
-        assert_eq!(unescape(&src.as_bytes()[t.span.start..t.span.end]), "a\"b\\c\n");
+        assert_eq!(
+            unescape(&src.as_bytes()[t.span.start..t.span.end]),
+            "a\"b\\c\n"
+        );
         let mut l = Lexer::new(0);
         let e = l.next_token(b"  \"abc\nx").unwrap_err();
         assert_eq!(e.offset, 2);

@@ -30,6 +30,9 @@
 //! `Instance` whose `to_world` is the CTM at the instance. Meshes listed in
 //! [`LoadedScene::prototypes`] (also named by any instance) are not drawn on their own.
 
+// `!(x > 0.0)` is deliberate throughout: it rejects NaN along with non-positive values.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod bench;
 pub mod lexer;
 pub mod paper;
@@ -85,7 +88,8 @@ pub fn parse_text(text: &str, path: &Path, opts: &LoadOptions) -> Result<LoadedS
     }
     // Identical messages are reported once, with the location of the first and a count.
     let mut order: Vec<&str> = vec![];
-    let mut seen: std::collections::HashMap<&str, (usize, &SpanError)> = std::collections::HashMap::new();
+    let mut seen: std::collections::HashMap<&str, (usize, &SpanError)> =
+        std::collections::HashMap::new();
     for w in &p.ctx.warnings {
         let e = seen.entry(w.message.as_str()).or_insert_with(|| {
             order.push(w.message.as_str());
@@ -98,23 +102,38 @@ pub fn parse_text(text: &str, path: &Path, opts: &LoadOptions) -> Result<LoadedS
         .map(|m| {
             let (n, w) = seen[m];
             let t = warning_text(&p, w);
-            if n > 1 { format!("{t} (and {} more like this)", n - 1) } else { t }
+            if n > 1 {
+                format!("{t} (and {} more like this)", n - 1)
+            } else {
+                t
+            }
         })
         .collect();
     let mut scene = std::mem::take(&mut p.scene);
     scene.warnings.extend(warnings);
-    Ok(LoadedScene { scene, prototypes: p.prototypes.clone(), shape_directives: p.shape_count })
+    Ok(LoadedScene {
+        scene,
+        prototypes: p.prototypes.clone(),
+        shape_directives: p.shape_count,
+    })
 }
 
 fn located(p: &parser::Parser, e: &SpanError) -> Located {
     let f = &p.files[(e.span.file as usize).min(p.files.len().saturating_sub(1))];
     let len = e.span.end.saturating_sub(e.span.start).max(1);
-    Located::at_offset(&f.path, &f.text, e.span.start, len, e.message.clone()).with_help_opt(e.help.clone())
+    Located::at_offset(&f.path, &f.text, e.span.start, len, e.message.clone())
+        .with_help_opt(e.help.clone())
 }
 
 fn warning_text(p: &parser::Parser, w: &SpanError) -> String {
     let l = located(p, w);
-    format!("{}:{}:{}: warning: {}", l.file.display(), l.line, l.col, l.message)
+    format!(
+        "{}:{}:{}: warning: {}",
+        l.file.display(),
+        l.line,
+        l.col,
+        l.message
+    )
 }
 
 /// Axis-aligned world bounds of everything drawn (plain meshes, instances, spheres,
@@ -166,17 +185,29 @@ pub fn world_bounds(scene: &Scene, prototypes: &[usize]) -> Option<(DVec3, DVec3
 /// The JSON of `camsim scene info`.
 pub fn info_json(l: &LoadedScene) -> serde_json::Value {
     let s = &l.scene;
-    let plain: Vec<usize> = (0..s.meshes.len()).filter(|i| !l.prototypes.contains(i)).collect();
+    let plain: Vec<usize> = (0..s.meshes.len())
+        .filter(|i| !l.prototypes.contains(i))
+        .collect();
     let triangles: usize = plain.iter().map(|&i| s.meshes[i].indices.len()).sum();
     let instanced: usize = s
         .instances
         .iter()
-        .map(|inst| inst.prototype.iter().filter_map(|&i| s.meshes.get(i)).map(|m| m.indices.len()).sum::<usize>())
+        .map(|inst| {
+            inst.prototype
+                .iter()
+                .filter_map(|&i| s.meshes.get(i))
+                .map(|m| m.indices.len())
+                .sum::<usize>()
+        })
         .sum();
-    let area_lights = plain.iter().filter(|&&i| s.meshes[i].emission.is_some()).count()
+    let area_lights = plain
+        .iter()
+        .filter(|&&i| s.meshes[i].emission.is_some())
+        .count()
         + s.spheres.iter().filter(|x| x.emission.is_some()).count()
         + s.disks.iter().filter(|x| x.emission.is_some()).count();
-    let bounds = world_bounds(s, &l.prototypes).map(|(a, b)| serde_json::json!({"min_m": [a.x, a.y, a.z], "max_m": [b.x, b.y, b.z]}));
+    let bounds = world_bounds(s, &l.prototypes)
+        .map(|(a, b)| serde_json::json!({"min_m": [a.x, a.y, a.z], "max_m": [b.x, b.y, b.z]}));
     let camera = s.camera.as_ref().map(|c| {
         let pos = c.to_world.transform_point3(DVec3::ZERO);
         let dir = c.to_world.transform_vector3(DVec3::Z).normalize();

@@ -42,7 +42,11 @@ fn exported_alpha(m: &Material) -> f64 {
         Material::DiffuseSpecular { roughness, .. } => *roughness,
         _ => {
             let x = 0.1f64.ln();
-            1.62142 + 0.819955 * x + 0.1734 * x * x + 0.0171201 * x.powi(3) + 0.000640711 * x.powi(4)
+            1.62142
+                + 0.819955 * x
+                + 0.1734 * x * x
+                + 0.0171201 * x.powi(3)
+                + 0.000640711 * x.powi(4)
         }
     }
 }
@@ -57,14 +61,28 @@ pub fn apply_paper_spectra(scene: &mut Scene) -> Result<PaperSpectraReport> {
     for nm in &mut scene.materials {
         let alpha = exported_alpha(&nm.material);
         let new = match nm.name.as_str() {
-            "LeftWall" => Some(Material::DiffuseSpecular { diffuse: red.clone(), specular: red.clone().scaled(0.1), roughness: alpha }),
-            "RightWall" => Some(Material::DiffuseSpecular { diffuse: green.clone(), specular: green.clone().scaled(0.1), roughness: alpha }),
-            "BackWall" | "TopWall" | "BottomWall" => Some(Material::Diffuse { reflectance: white.clone() }),
-            "CubeSmall" | "CubeLarge" => {
-                Some(Material::DiffuseSpecular { diffuse: white.clone(), specular: white.clone().scaled(0.5), roughness: alpha })
-            }
+            "LeftWall" => Some(Material::DiffuseSpecular {
+                diffuse: red.clone(),
+                specular: red.clone().scaled(0.1),
+                roughness: alpha,
+            }),
+            "RightWall" => Some(Material::DiffuseSpecular {
+                diffuse: green.clone(),
+                specular: green.clone().scaled(0.1),
+                roughness: alpha,
+            }),
+            "BackWall" | "TopWall" | "BottomWall" => Some(Material::Diffuse {
+                reflectance: white.clone(),
+            }),
+            "CubeSmall" | "CubeLarge" => Some(Material::DiffuseSpecular {
+                diffuse: white.clone(),
+                specular: white.clone().scaled(0.5),
+                roughness: alpha,
+            }),
             n => match n.strip_prefix("Patch").and_then(|d| d.parse::<u32>().ok()) {
-                Some(k) if (1..=24).contains(&k) => Some(Material::Diffuse { reflectance: lib(&format!("mcc-mini-{k:02}"))? }),
+                Some(k) if (1..=24).contains(&k) => Some(Material::Diffuse {
+                    reflectance: lib(&format!("mcc-mini-{k:02}"))?,
+                }),
                 _ => None,
             },
         };
@@ -83,7 +101,10 @@ pub fn apply_paper_spectra(scene: &mut Scene) -> Result<PaperSpectraReport> {
         .collect();
     for m in &mut scene.meshes {
         if lamp_objects.contains(&m.object) {
-            m.emission = Some(Emission { radiance: lamp.clone(), two_sided: false });
+            m.emission = Some(Emission {
+                radiance: lamp.clone(),
+                two_sided: false,
+            });
             for p in &mut m.positions {
                 p.y -= 0.005;
             }

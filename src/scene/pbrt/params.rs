@@ -40,7 +40,11 @@ pub struct SpanError {
 
 impl SpanError {
     pub fn new(span: Span, message: impl Into<String>) -> Self {
-        Self { span, message: message.into(), help: None }
+        Self {
+            span,
+            message: message.into(),
+            help: None,
+        }
     }
 }
 
@@ -60,14 +64,21 @@ impl Ctx {
     pub fn warn(&mut self, span: Span, message: impl Into<String>) -> PResult<()> {
         let e = SpanError::new(span, message);
         if self.strict {
-            return Err(SpanError { message: format!("{} (an error with --strict)", e.message), ..e });
+            return Err(SpanError {
+                message: format!("{} (an error with --strict)", e.message),
+                ..e
+            });
         }
         self.warnings.push(e);
         Ok(())
     }
     pub fn resolve_path(&self, p: &str) -> PathBuf {
         let path = Path::new(p);
-        if path.is_absolute() { path.to_path_buf() } else { self.base_dir.join(path) }
+        if path.is_absolute() {
+            path.to_path_buf()
+        } else {
+            self.base_dir.join(path)
+        }
     }
 }
 
@@ -91,8 +102,23 @@ pub enum ParamType {
 }
 
 pub const TYPE_NAMES: &[&str] = &[
-    "integer", "float", "bool", "string", "point2", "vector2", "point3", "vector3", "normal", "normal3", "rgb",
-    "blackbody", "spectrum", "texture", "point", "vector", "color",
+    "integer",
+    "float",
+    "bool",
+    "string",
+    "point2",
+    "vector2",
+    "point3",
+    "vector3",
+    "normal",
+    "normal3",
+    "rgb",
+    "blackbody",
+    "spectrum",
+    "texture",
+    "point",
+    "vector",
+    "color",
 ];
 
 impl ParamType {
@@ -139,7 +165,10 @@ impl ParamType {
     }
     /// Whether values are numbers (else strings, or bools).
     pub fn numeric(self) -> bool {
-        !matches!(self, ParamType::Bool | ParamType::String | ParamType::Texture)
+        !matches!(
+            self,
+            ParamType::Bool | ParamType::String | ParamType::Texture
+        )
     }
     /// Values per element (3 for point3), 0 when any count is fine.
     pub fn arity(self) -> usize {
@@ -200,7 +229,11 @@ pub struct ParamList {
 impl ParamList {
     /// Add a parameter; a same-named earlier one is removed (last wins) and returned.
     pub fn push(&mut self, p: Param) -> Option<Param> {
-        let old = self.params.iter().position(|q| q.name == p.name).map(|i| self.params.remove(i));
+        let old = self
+            .params
+            .iter()
+            .position(|q| q.name == p.name)
+            .map(|i| self.params.remove(i));
         self.params.push(p);
         old
     }
@@ -215,23 +248,34 @@ impl ParamList {
     }
 
     fn typed(&self, name: &str, tys: &[ParamType]) -> PResult<Option<&Param>> {
-        let Some(p) = self.find(name) else { return Ok(None) };
+        let Some(p) = self.find(name) else {
+            return Ok(None);
+        };
         if !tys.contains(&p.ty) {
             let want: Vec<&str> = tys.iter().map(|t| t.name()).collect();
             return Err(SpanError::new(
                 p.span,
-                format!("parameter '{name}' has type '{}', expected {}", p.ty.name(), want.join(" or ")),
+                format!(
+                    "parameter '{name}' has type '{}', expected {}",
+                    p.ty.name(),
+                    want.join(" or ")
+                ),
             ));
         }
         Ok(Some(p))
     }
 
     fn one_num(&self, name: &str, ty: ParamType) -> PResult<Option<f64>> {
-        let Some(p) = self.typed(name, &[ty])? else { return Ok(None) };
+        let Some(p) = self.typed(name, &[ty])? else {
+            return Ok(None);
+        };
         if p.nums.len() != 1 {
             return Err(SpanError::new(
                 p.span,
-                format!("parameter '{name}' needs exactly 1 value, got {}", p.nums.len()),
+                format!(
+                    "parameter '{name}' needs exactly 1 value, got {}",
+                    p.nums.len()
+                ),
             ));
         }
         Ok(Some(p.nums[0]))
@@ -244,37 +288,59 @@ impl ParamList {
         self.one_num(name, ParamType::Float)
     }
     pub fn int(&self, name: &str, default: i64) -> PResult<i64> {
-        Ok(self.one_num(name, ParamType::Integer)?.map(|v| v as i64).unwrap_or(default))
+        Ok(self
+            .one_num(name, ParamType::Integer)?
+            .map(|v| v as i64)
+            .unwrap_or(default))
     }
     pub fn bool(&self, name: &str, default: bool) -> PResult<bool> {
-        let Some(p) = self.typed(name, &[ParamType::Bool])? else { return Ok(default) };
+        let Some(p) = self.typed(name, &[ParamType::Bool])? else {
+            return Ok(default);
+        };
         if p.bools.len() != 1 {
-            return Err(SpanError::new(p.span, format!("parameter '{name}' needs exactly 1 value")));
+            return Err(SpanError::new(
+                p.span,
+                format!("parameter '{name}' needs exactly 1 value"),
+            ));
         }
         Ok(p.bools[0])
     }
     pub fn string(&self, name: &str) -> PResult<Option<String>> {
-        let Some(p) = self.typed(name, &[ParamType::String])? else { return Ok(None) };
+        let Some(p) = self.typed(name, &[ParamType::String])? else {
+            return Ok(None);
+        };
         if p.strs.len() != 1 {
-            return Err(SpanError::new(p.span, format!("parameter '{name}' needs exactly 1 value")));
+            return Err(SpanError::new(
+                p.span,
+                format!("parameter '{name}' needs exactly 1 value"),
+            ));
         }
         Ok(Some(p.strs[0].clone()))
     }
     pub fn floats(&self, name: &str) -> PResult<Option<&[f64]>> {
-        Ok(self.typed(name, &[ParamType::Float])?.map(|p| p.nums.as_slice()))
+        Ok(self
+            .typed(name, &[ParamType::Float])?
+            .map(|p| p.nums.as_slice()))
     }
     /// Integer array (values were checked to be integral when parsed).
     pub fn ints(&self, name: &str) -> PResult<Option<&[f64]>> {
-        Ok(self.typed(name, &[ParamType::Integer])?.map(|p| p.nums.as_slice()))
+        Ok(self
+            .typed(name, &[ParamType::Integer])?
+            .map(|p| p.nums.as_slice()))
     }
     /// point3 / vector3 / normal array (flat, multiple of 3).
     pub fn vec3s(&self, name: &str, tys: &[ParamType]) -> PResult<Option<&[f64]>> {
         Ok(self.typed(name, tys)?.map(|p| p.nums.as_slice()))
     }
     pub fn point3(&self, name: &str, default: [f64; 3]) -> PResult<[f64; 3]> {
-        let Some(p) = self.typed(name, &[ParamType::Point3])? else { return Ok(default) };
+        let Some(p) = self.typed(name, &[ParamType::Point3])? else {
+            return Ok(default);
+        };
         if p.nums.len() != 3 {
-            return Err(SpanError::new(p.span, format!("parameter '{name}' needs one point (3 values)")));
+            return Err(SpanError::new(
+                p.span,
+                format!("parameter '{name}' needs one point (3 values)"),
+            ));
         }
         Ok([p.nums[0], p.nums[1], p.nums[2]])
     }
@@ -284,7 +350,10 @@ impl ParamList {
 
     /// A texture reference (`"texture reflectance" "name"`), if the parameter has that type.
     pub fn texture_name(&self, name: &str) -> Option<(String, Span)> {
-        let p = self.params.iter().find(|p| p.name == name && p.ty == ParamType::Texture)?;
+        let p = self
+            .params
+            .iter()
+            .find(|p| p.name == name && p.ty == ParamType::Texture)?;
         p.used.set(true);
         p.strs.first().map(|s| (s.clone(), p.span))
     }
@@ -292,9 +361,16 @@ impl ParamList {
     /// A spectrum from `rgb`, `blackbody`, `spectrum` (λ/value pairs, named, file) or a
     /// single `float` (a constant spectrum). None when absent; an unknown named
     /// spectrum gives a warning and None (the caller's default applies).
-    pub fn spectrum(&self, name: &str, kind: SpectrumKind, ctx: &mut Ctx) -> PResult<Option<Spectrum>> {
+    pub fn spectrum(
+        &self,
+        name: &str,
+        kind: SpectrumKind,
+        ctx: &mut Ctx,
+    ) -> PResult<Option<Spectrum>> {
         use ParamType::*;
-        let Some(p) = self.typed(name, &[Rgb, Blackbody, Spectrum, Float])? else { return Ok(None) };
+        let Some(p) = self.typed(name, &[Rgb, Blackbody, Spectrum, Float])? else {
+            return Ok(None);
+        };
         to_spectrum(p, kind, ctx)
     }
 
@@ -309,25 +385,41 @@ fn to_spectrum(p: &Param, kind: SpectrumKind, ctx: &mut Ctx) -> PResult<Option<S
     match p.ty {
         ParamType::Float => {
             if p.nums.len() != 1 {
-                return Err(SpanError::new(p.span, format!("parameter '{name}' needs exactly 1 value")));
+                return Err(SpanError::new(
+                    p.span,
+                    format!("parameter '{name}' needs exactly 1 value"),
+                ));
             }
             Ok(Some(Spectrum::constant(name.clone(), p.nums[0])))
         }
         ParamType::Rgb => {
             if p.nums.len() != 3 {
-                return Err(SpanError::new(p.span, format!("rgb parameter '{name}' needs 3 values, got {}", p.nums.len())));
+                return Err(SpanError::new(
+                    p.span,
+                    format!(
+                        "rgb parameter '{name}' needs 3 values, got {}",
+                        p.nums.len()
+                    ),
+                ));
             }
             let rgb = [p.nums[0], p.nums[1], p.nums[2]];
             if rgb.iter().any(|&v| v < 0.0) {
-                return Err(SpanError::new(p.span, format!("rgb parameter '{name}' has a negative value")));
+                return Err(SpanError::new(
+                    p.span,
+                    format!("rgb parameter '{name}' has a negative value"),
+                ));
             }
             if kind == SpectrumKind::Albedo && rgb.iter().any(|&v| v > 1.0) {
                 return Err(SpanError::new(
                     p.span,
-                    format!("rgb reflectance '{name}' has a value above 1 ({rgb:?}); reflectances must be in [0, 1]"),
+                    format!(
+                        "rgb reflectance '{name}' has a value above 1 ({rgb:?}); reflectances must be in [0, 1]"
+                    ),
                 ));
             }
-            rgb_to_spectrum(rgb, kind, name).map(Some).map_err(|m| SpanError::new(p.span, m))
+            rgb_to_spectrum(rgb, kind, name)
+                .map(Some)
+                .map_err(|m| SpanError::new(p.span, m))
         }
         ParamType::Blackbody => {
             let (t, scale) = match p.nums.len() {
@@ -336,17 +428,28 @@ fn to_spectrum(p: &Param, kind: SpectrumKind, ctx: &mut Ctx) -> PResult<Option<S
                     ctx.warn(p.span, format!("pbrt-v3 blackbody form [T scale] for '{name}'; read as v4 T with a scale"))?;
                     (p.nums[0], p.nums[1])
                 }
-                n => return Err(SpanError::new(p.span, format!("blackbody '{name}' needs 1 value (K), got {n}"))),
+                n => {
+                    return Err(SpanError::new(
+                        p.span,
+                        format!("blackbody '{name}' needs 1 value (K), got {n}"),
+                    ));
+                }
             };
             if t <= 0.0 {
-                return Err(SpanError::new(p.span, format!("blackbody temperature must be > 0 K, got {t}")));
+                return Err(SpanError::new(
+                    p.span,
+                    format!("blackbody temperature must be > 0 K, got {t}"),
+                ));
             }
             Ok(Some(blackbody_normalized(t).scaled(scale)))
         }
         ParamType::Spectrum => {
             if !p.strs.is_empty() {
                 if p.strs.len() != 1 {
-                    return Err(SpanError::new(p.span, format!("spectrum '{name}' needs one name or file")));
+                    return Err(SpanError::new(
+                        p.span,
+                        format!("spectrum '{name}' needs one name or file"),
+                    ));
                 }
                 let s = &p.strs[0];
                 if let Some(sp) = named_spectrum(s) {
@@ -355,18 +458,29 @@ fn to_spectrum(p: &Param, kind: SpectrumKind, ctx: &mut Ctx) -> PResult<Option<S
                 if let Ok(sp) = crate::spectrum::library::named(s) {
                     return Ok(Some(sp));
                 }
-                if s.starts_with("metal-") || s.starts_with("glass-") || s.starts_with("stdillum-") || s.starts_with("canon") || s.starts_with("nikon") || s.starts_with("sony") {
+                if s.starts_with("metal-")
+                    || s.starts_with("glass-")
+                    || s.starts_with("stdillum-")
+                    || s.starts_with("canon")
+                    || s.starts_with("nikon")
+                    || s.starts_with("sony")
+                {
                     ctx.warn(p.span, format!("named spectrum '{s}' is not built into camsim; using the default for '{name}'"))?;
                     return Ok(None);
                 }
                 let path = ctx.resolve_path(s);
-                return read_spectrum_file(&path).map(Some).map_err(|m| SpanError::new(p.span, m));
+                return read_spectrum_file(&path)
+                    .map(Some)
+                    .map_err(|m| SpanError::new(p.span, m));
             }
             let v = &p.nums;
-            if v.len() < 2 || v.len() % 2 != 0 {
+            if v.len() < 2 || !v.len().is_multiple_of(2) {
                 return Err(SpanError::new(
                     p.span,
-                    format!("spectrum '{name}' needs λ/value pairs (an even count ≥ 2), got {} values", v.len()),
+                    format!(
+                        "spectrum '{name}' needs λ/value pairs (an even count ≥ 2), got {} values",
+                        v.len()
+                    ),
                 ));
             }
             let (w, val): (Vec<f64>, Vec<f64>) = v.chunks(2).map(|c| (c[0], c[1])).unzip();
@@ -385,7 +499,11 @@ fn logistic(x: f64) -> f64 {
 pub fn rgb_to_spectrum(rgb: [f64; 3], kind: SpectrumKind, name: &str) -> Result<Spectrum, String> {
     const W: f64 = 12.0;
     let wl: Vec<f64> = (0..=94).map(|i| 360.0 + 5.0 * i as f64).collect();
-    let white = if kind == SpectrumKind::Illuminant { Some(d65_normalized()) } else { None };
+    let white = if kind == SpectrumKind::Illuminant {
+        Some(d65_normalized())
+    } else {
+        None
+    };
     let vals = wl
         .iter()
         .map(|&l| {
@@ -401,12 +519,20 @@ pub fn rgb_to_spectrum(rgb: [f64; 3], kind: SpectrumKind, name: &str) -> Result<
         .collect();
     // Err only when huge rgb values overflow to infinity.
     let sp = Spectrum::new(name.to_string(), wl, vals)?;
-    Ok(sp.with_extrapolation(if kind == SpectrumKind::Illuminant { Extrapolation::Zero } else { Extrapolation::Clamp }))
+    Ok(sp.with_extrapolation(if kind == SpectrumKind::Illuminant {
+        Extrapolation::Zero
+    } else {
+        Extrapolation::Clamp
+    }))
 }
 
 /// CIE Y of a spectrum relative to the equal-energy white's (∫ȳ·s / ∫ȳ), 360–830 nm.
 pub fn luminance_y(s: &Spectrum) -> f64 {
-    let grid = WavelengthGrid { start_nm: 360.0, step_nm: 1.0, count: 471 };
+    let grid = WavelengthGrid {
+        start_nm: 360.0,
+        step_nm: 1.0,
+        count: 471,
+    };
     let y = &crate::spectrum::library::cie1931_cmfs()[1];
     static ONE: std::sync::OnceLock<f64> = std::sync::OnceLock::new();
     let one = *ONE.get_or_init(|| Spectrum::constant("one", 1.0).integrate_product(y, &grid));
@@ -439,10 +565,13 @@ pub fn blackbody_normalized(t_k: f64) -> Spectrum {
     let peak_nm = 2.897_771_955e-3 / t_k * 1e9;
     let peak = planck(peak_nm);
     let wl: Vec<f64> = (0..=140).map(|i| 300.0 + 5.0 * i as f64).collect();
-    let vals: Vec<f64> = wl.iter().map(|&l| {
-        let v = planck(l) / peak;
-        if v.is_finite() { v } else { 0.0 }
-    }).collect();
+    let vals: Vec<f64> = wl
+        .iter()
+        .map(|&l| {
+            let v = planck(l) / peak;
+            if v.is_finite() { v } else { 0.0 }
+        })
+        .collect();
     Spectrum::new(format!("blackbody-{t_k}K"), wl, vals).expect("finite")
 }
 
@@ -456,7 +585,9 @@ fn sellmeier(name: &str, b: [f64; 3], c: [f64; 3]) -> Spectrum {
             (1.0 + (0..3).map(|i| b[i] * l2 / (l2 - c[i])).sum::<f64>()).sqrt()
         })
         .collect();
-    Spectrum::new(name, wl, vals).expect("finite").with_extrapolation(Extrapolation::Clamp)
+    Spectrum::new(name, wl, vals)
+        .expect("finite")
+        .with_extrapolation(Extrapolation::Clamp)
 }
 
 /// pbrt's named spectra that camsim builds in (see module docs).
@@ -466,18 +597,29 @@ pub fn named_spectrum(name: &str) -> Option<Spectrum> {
         "stdillum-A" => normalized_illuminant("cie-a", name),
         "stdillum-F2" => normalized_illuminant("cie-f2", name),
         // Schott N-BK7 catalogue Sellmeier coefficients.
-        "glass-BK7" => sellmeier(name, [1.039_612_12, 0.231_792_344, 1.010_469_45], [0.006_000_698_67, 0.020_017_914_4, 103.560_653]),
+        "glass-BK7" => sellmeier(
+            name,
+            [1.039_612_12, 0.231_792_344, 1.010_469_45],
+            [0.006_000_698_67, 0.020_017_914_4, 103.560_653],
+        ),
         // Fused silica (Malitson 1965).
-        "fused-silica" | "glass-fused-silica" => {
-            sellmeier(name, [0.696_166_3, 0.407_942_6, 0.897_479_4], [0.068_404_3f64.powi(2), 0.116_241_4f64.powi(2), 9.896_161f64.powi(2)])
-        }
+        "fused-silica" | "glass-fused-silica" => sellmeier(
+            name,
+            [0.696_166_3, 0.407_942_6, 0.897_479_4],
+            [
+                0.068_404_3f64.powi(2),
+                0.116_241_4f64.powi(2),
+                9.896_161f64.powi(2),
+            ],
+        ),
         _ => return None,
     })
 }
 
 /// Read a pbrt spectrum file: whitespace-separated `λ value` pairs, `#` comments.
 pub fn read_spectrum_file(path: &Path) -> Result<Spectrum, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("cannot read spectrum file {}: {e}", path.display()))?;
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("cannot read spectrum file {}: {e}", path.display()))?;
     let mut nums = vec![];
     for (ln, line) in text.lines().enumerate() {
         let line = line.split('#').next().unwrap_or("");
@@ -486,17 +628,27 @@ pub fn read_spectrum_file(path: &Path) -> Result<Spectrum, String> {
                 continue;
             }
             nums.push(
-                super::lexer::parse_number(w)
-                    .ok_or_else(|| format!("{}:{}: '{w}' is not a number", path.display(), ln + 1))?,
+                super::lexer::parse_number(w).ok_or_else(|| {
+                    format!("{}:{}: '{w}' is not a number", path.display(), ln + 1)
+                })?,
             );
         }
     }
-    if nums.len() < 2 || nums.len() % 2 != 0 {
-        return Err(format!("{}: expected λ/value pairs, got {} numbers", path.display(), nums.len()));
+    if nums.len() < 2 || !nums.len().is_multiple_of(2) {
+        return Err(format!(
+            "{}: expected λ/value pairs, got {} numbers",
+            path.display(),
+            nums.len()
+        ));
     }
     let (w, v): (Vec<f64>, Vec<f64>) = nums.chunks(2).map(|c| (c[0], c[1])).unzip();
-    let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-    Spectrum::new(name, w, v).map(|s| s.with_extrapolation(Extrapolation::Clamp)).map_err(|e| format!("{}: {e}", path.display()))
+    let name = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    Spectrum::new(name, w, v)
+        .map(|s| s.with_extrapolation(Extrapolation::Clamp))
+        .map_err(|e| format!("{}: {e}", path.display()))
 }
 
 #[cfg(test)]
@@ -511,7 +663,12 @@ mod tests {
         assert!(red.eval(700.0) > 0.99 && red.eval(420.0) < 1e-3);
         let blue = rgb_to_spectrum([0.0, 0.0, 1.0], SpectrumKind::Albedo, "b").unwrap();
         assert!(blue.eval(420.0) > 0.99 && blue.eval(650.0) < 1e-3);
-        for rgb in [[1.0, 1.0, 0.0], [0.0, 1.0, 1.0], [1.0, 0.0, 1.0], [1.0, 1.0, 1.0]] {
+        for rgb in [
+            [1.0, 1.0, 0.0],
+            [0.0, 1.0, 1.0],
+            [1.0, 0.0, 1.0],
+            [1.0, 1.0, 1.0],
+        ] {
             let s = rgb_to_spectrum(rgb, SpectrumKind::Albedo, "x").unwrap();
             assert!(s.values.iter().all(|&v| (0.0..=1.0 + 1e-12).contains(&v)));
         }
@@ -529,7 +686,9 @@ mod tests {
         // Schott N-BK7: n_d = 1.5168 at 587.6 nm.
         let s = named_spectrum("glass-BK7").unwrap();
         let l2: f64 = 0.5876f64.powi(2);
-        let n = (1.0 + 1.039_612_12 * l2 / (l2 - 0.006_000_698_67) + 0.231_792_344 * l2 / (l2 - 0.020_017_914_4)
+        let n = (1.0
+            + 1.039_612_12 * l2 / (l2 - 0.006_000_698_67)
+            + 0.231_792_344 * l2 / (l2 - 0.020_017_914_4)
             + 1.010_469_45 * l2 / (l2 - 103.560_653))
             .sqrt();
         assert!((n - 1.5168).abs() < 2e-4);
@@ -539,7 +698,11 @@ mod tests {
     #[test]
     fn blackbody_peaks_at_one_where_wien_says() {
         let b = blackbody_normalized(6500.0);
-        let (i, m) = b.values.iter().enumerate().fold((0, 0.0), |a, (i, &v)| if v > a.1 { (i, v) } else { a });
+        let (i, m) = b
+            .values
+            .iter()
+            .enumerate()
+            .fold((0, 0.0), |a, (i, &v)| if v > a.1 { (i, v) } else { a });
         assert!(m <= 1.0 + 1e-12 && m > 0.999);
         assert!((b.wavelengths_nm[i] - 445.8).abs() < 5.0);
     }

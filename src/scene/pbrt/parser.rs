@@ -76,12 +76,47 @@ impl Default for GState {
 }
 
 const DIRECTIVES: &[&str] = &[
-    "Accelerator", "ActiveTransform", "AreaLightSource", "Attribute", "AttributeBegin", "AttributeEnd", "Camera",
-    "ColorSpace", "ConcatTransform", "CoordinateSystem", "CoordSysTransform", "Film", "Identity", "Import", "Include",
-    "Integrator", "LightSource", "LookAt", "MakeNamedMaterial", "MakeNamedMedium", "Material", "MediumInterface",
-    "NamedMaterial", "ObjectBegin", "ObjectEnd", "ObjectInstance", "Option", "PixelFilter", "ReverseOrientation",
-    "Rotate", "Sampler", "Scale", "Shape", "Texture", "Transform", "TransformBegin", "TransformEnd", "TransformTimes",
-    "Translate", "WorldBegin", "WorldEnd",
+    "Accelerator",
+    "ActiveTransform",
+    "AreaLightSource",
+    "Attribute",
+    "AttributeBegin",
+    "AttributeEnd",
+    "Camera",
+    "ColorSpace",
+    "ConcatTransform",
+    "CoordinateSystem",
+    "CoordSysTransform",
+    "Film",
+    "Identity",
+    "Import",
+    "Include",
+    "Integrator",
+    "LightSource",
+    "LookAt",
+    "MakeNamedMaterial",
+    "MakeNamedMedium",
+    "Material",
+    "MediumInterface",
+    "NamedMaterial",
+    "ObjectBegin",
+    "ObjectEnd",
+    "ObjectInstance",
+    "Option",
+    "PixelFilter",
+    "ReverseOrientation",
+    "Rotate",
+    "Sampler",
+    "Scale",
+    "Shape",
+    "Texture",
+    "Transform",
+    "TransformBegin",
+    "TransformEnd",
+    "TransformTimes",
+    "Translate",
+    "WorldBegin",
+    "WorldEnd",
 ];
 
 const MAX_INCLUDE_DEPTH: usize = 64;
@@ -121,7 +156,11 @@ impl Parser {
             active_paths: vec![],
             peeked: None,
             pending_hints: vec![],
-            ctx: Ctx { strict, base_dir, warnings: vec![] },
+            ctx: Ctx {
+                strict,
+                base_dir,
+                warnings: vec![],
+            },
             scene: Scene::default(),
             state: GState::default(),
             state_stack: vec![],
@@ -145,7 +184,8 @@ impl Parser {
     pub fn push_source(&mut self, path: PathBuf, text: String) {
         let canon = std::fs::canonicalize(&path).unwrap_or_else(|_| path.clone());
         self.files.push(SourceFile { path, text });
-        self.stack.push(Lexer::new((self.files.len() - 1) as FileId));
+        self.stack
+            .push(Lexer::new((self.files.len() - 1) as FileId));
         self.active_paths.push(canon);
     }
 
@@ -156,16 +196,18 @@ impl Parser {
 
     fn string_of(&self, t: &Token) -> String {
         match t.kind {
-            TokenKind::Str { escaped: true } => {
-                unescape(&self.files[t.span.file as usize].text.as_bytes()[t.span.start..t.span.end])
-            }
+            TokenKind::Str { escaped: true } => unescape(
+                &self.files[t.span.file as usize].text.as_bytes()[t.span.start..t.span.end],
+            ),
             _ => self.text(t.span).to_string(),
         }
     }
 
     fn raw_next(&mut self) -> PResult<Option<Token>> {
         loop {
-            let Some(lx) = self.stack.last_mut() else { return Ok(None) };
+            let Some(lx) = self.stack.last_mut() else {
+                return Ok(None);
+            };
             let src = self.files[lx.file as usize].text.as_bytes();
             match lx.next_token(src) {
                 Ok(Some(t)) => return Ok(Some(t)),
@@ -175,7 +217,11 @@ impl Parser {
                 }
                 Err(e) => {
                     return Err(SpanError::new(
-                        Span { file: lx.file, start: e.offset, end: e.offset + e.len.max(1) },
+                        Span {
+                            file: lx.file,
+                            start: e.offset,
+                            end: e.offset + e.len.max(1),
+                        },
                         e.message,
                     ));
                 }
@@ -207,7 +253,11 @@ impl Parser {
 
     /// Span just past the last token, for "unexpected end of file" errors.
     fn eof_span(&self, after: Span) -> Span {
-        Span { file: after.file, start: after.end, end: after.end + 1 }
+        Span {
+            file: after.file,
+            start: after.end,
+            end: after.end + 1,
+        }
     }
 
     fn expect_string(&mut self, directive: &str, dspan: Span) -> PResult<(String, Span)> {
@@ -215,9 +265,15 @@ impl Parser {
             Some(t) if matches!(t.kind, TokenKind::Str { .. }) => Ok((self.string_of(&t), t.span)),
             Some(t) => Err(SpanError::new(
                 t.span,
-                format!("'{directive}' expects a quoted string, found '{}'", self.text(t.span)),
+                format!(
+                    "'{directive}' expects a quoted string, found '{}'",
+                    self.text(t.span)
+                ),
             )),
-            None => Err(SpanError::new(self.eof_span(dspan), format!("'{directive}' expects a quoted string, found the end of the file"))),
+            None => Err(SpanError::new(
+                self.eof_span(dspan),
+                format!("'{directive}' expects a quoted string, found the end of the file"),
+            )),
         }
     }
 
@@ -239,8 +295,13 @@ impl Parser {
             let t = self.next()?;
             let Some(t) = t else {
                 let msg = match bracket {
-                    Some(_) => format!("missing ']' in '{directive}': end of file before the closing bracket"),
-                    None => format!("'{directive}' expects {n} numbers, found the end of the file after {}", v.len()),
+                    Some(_) => format!(
+                        "missing ']' in '{directive}': end of file before the closing bracket"
+                    ),
+                    None => format!(
+                        "'{directive}' expects {n} numbers, found the end of the file after {}",
+                        v.len()
+                    ),
                 };
                 return Err(SpanError::new(bracket.unwrap_or(self.eof_span(last)), msg));
             };
@@ -251,7 +312,10 @@ impl Parser {
                 _ => {
                     let mut e = SpanError::new(
                         t.span,
-                        format!("'{directive}' expects {n} numbers, found '{}'", self.text(t.span)),
+                        format!(
+                            "'{directive}' expects {n} numbers, found '{}'",
+                            self.text(t.span)
+                        ),
                     );
                     if bracket.is_some() {
                         e.help = Some("missing ']'?".into());
@@ -261,7 +325,10 @@ impl Parser {
             }
         }
         if v.len() != n {
-            return Err(SpanError::new(dspan, format!("'{directive}' expects {n} numbers, got {}", v.len())));
+            return Err(SpanError::new(
+                dspan,
+                format!("'{directive}' expects {n} numbers, got {}", v.len()),
+            ));
         }
         Ok(v)
     }
@@ -284,11 +351,15 @@ impl Parser {
             };
             let Some((ty, v3_alias)) = ParamType::parse(ty_s) else {
                 let mut e = SpanError::new(t.span, format!("unknown parameter type '{ty_s}'"));
-                e.help = suggest(ty_s, TYPE_NAMES.iter().copied()).map(|s| format!("did you mean '{s}'?"));
+                e.help = suggest(ty_s, TYPE_NAMES.iter().copied())
+                    .map(|s| format!("did you mean '{s}'?"));
                 return Err(e);
             };
             if v3_alias && ty_s == "color" {
-                self.ctx.warn(t.span, format!("pbrt-v3 parameter type 'color' for '{name}' read as 'rgb'"))?;
+                self.ctx.warn(
+                    t.span,
+                    format!("pbrt-v3 parameter type 'color' for '{name}' read as 'rgb'"),
+                )?;
             }
             let mut p = Param {
                 ty,
@@ -302,14 +373,19 @@ impl Parser {
             };
             let first = self.next()?;
             let Some(first) = first else {
-                return Err(SpanError::new(t.span, format!("parameter '{name}' has no value (end of file)")));
+                return Err(SpanError::new(
+                    t.span,
+                    format!("parameter '{name}' has no value (end of file)"),
+                ));
             };
             match first.kind {
                 TokenKind::LBracket => loop {
                     let Some(v) = self.next()? else {
                         let mut e = SpanError::new(
                             first.span,
-                            format!("missing ']' for parameter '{name}': end of file before the closing bracket"),
+                            format!(
+                                "missing ']' for parameter '{name}': end of file before the closing bracket"
+                            ),
                         );
                         e.help = Some("close the value list with ']'".into());
                         return Err(e);
@@ -322,19 +398,33 @@ impl Parser {
                 _ => self.value(&mut p, &first, false)?,
             }
             if p.is_empty() && ty != ParamType::Spectrum {
-                return Err(SpanError::new(t.span, format!("parameter '{name}' has an empty value list")));
-            }
-            if ty.numeric() && p.nums.len() % ty.arity() != 0 {
                 return Err(SpanError::new(
                     t.span,
-                    format!("{} parameter '{name}' needs a multiple of {} values, got {}", ty.name(), ty.arity(), p.nums.len()),
+                    format!("parameter '{name}' has an empty value list"),
+                ));
+            }
+            if ty.numeric() && !p.nums.len().is_multiple_of(ty.arity()) {
+                return Err(SpanError::new(
+                    t.span,
+                    format!(
+                        "{} parameter '{name}' needs a multiple of {} values, got {}",
+                        ty.name(),
+                        ty.arity(),
+                        p.nums.len()
+                    ),
                 ));
             }
             if ty == ParamType::Spectrum && !p.nums.is_empty() && !p.strs.is_empty() {
-                return Err(SpanError::new(t.span, format!("spectrum '{name}' mixes numbers and strings")));
+                return Err(SpanError::new(
+                    t.span,
+                    format!("spectrum '{name}' mixes numbers and strings"),
+                ));
             }
             if let Some(old) = list.push(p) {
-                self.ctx.warn(old.span, format!("parameter '{}' given twice; the last one is used", old.name))?;
+                self.ctx.warn(
+                    old.span,
+                    format!("parameter '{}' given twice; the last one is used", old.name),
+                )?;
             }
         }
         Ok(list)
@@ -342,12 +432,20 @@ impl Parser {
 
     fn value(&mut self, p: &mut Param, t: &Token, in_brackets: bool) -> PResult<()> {
         // A bare word inside brackets that is not a value is most likely the next directive.
-        let looks_like_directive = t.kind == TokenKind::Word && self.text(t.span).starts_with(|c: char| c.is_ascii_uppercase());
+        let looks_like_directive = t.kind == TokenKind::Word
+            && self
+                .text(t.span)
+                .starts_with(|c: char| c.is_ascii_uppercase());
         let help = (in_brackets && looks_like_directive).then(|| "missing ']'?".to_string());
         let bad = |s: &Self, what: &str| {
             let mut e = SpanError::new(
                 t.span,
-                format!("{} parameter '{}' expects {what}, found '{}'", p.ty.name(), p.name, s.text(t.span)),
+                format!(
+                    "{} parameter '{}' expects {what}, found '{}'",
+                    p.ty.name(),
+                    p.name,
+                    s.text(t.span)
+                ),
             );
             e.help = help.clone();
             e
@@ -411,7 +509,10 @@ impl Parser {
                     TokenKind::RBracket => "']' without a matching '['".into(),
                     _ => self.text(t.span).to_string(),
                 };
-                return Err(SpanError::new(t.span, format!("expected a directive, found {what}")));
+                return Err(SpanError::new(
+                    t.span,
+                    format!("expected a directive, found {what}"),
+                ));
             }
             self.apply_hints();
             let name = self.text(t.span).to_string();
@@ -421,22 +522,32 @@ impl Parser {
     }
 
     fn check_unused(&mut self, params: &ParamList, directive: &str) -> PResult<()> {
-        let unused: Vec<(Span, String)> = params.unused().map(|p| (p.span, p.name.clone())).collect();
+        let unused: Vec<(Span, String)> =
+            params.unused().map(|p| (p.span, p.name.clone())).collect();
         for (span, name) in unused {
-            self.ctx.warn(span, format!("parameter '{name}' is not used by '{directive}'"))?;
+            self.ctx.warn(
+                span,
+                format!("parameter '{name}' is not used by '{directive}'"),
+            )?;
         }
         Ok(())
     }
 
     fn world_only(&self, d: &str, span: Span) -> PResult<()> {
         if !self.in_world {
-            return Err(SpanError::new(span, format!("'{d}' is only allowed after WorldBegin")));
+            return Err(SpanError::new(
+                span,
+                format!("'{d}' is only allowed after WorldBegin"),
+            ));
         }
         Ok(())
     }
     fn options_only(&self, d: &str, span: Span) -> PResult<()> {
         if self.in_world {
-            return Err(SpanError::new(span, format!("'{d}' is not allowed after WorldBegin")));
+            return Err(SpanError::new(
+                span,
+                format!("'{d}' is not allowed after WorldBegin"),
+            ));
         }
         Ok(())
     }
@@ -463,7 +574,10 @@ impl Parser {
 
     fn pop_block(&mut self, kind: Block, span: Span, d: &str) -> PResult<()> {
         let Some((saved, k, _)) = self.state_stack.pop() else {
-            return Err(SpanError::new(span, format!("'{d}' without a matching begin")));
+            return Err(SpanError::new(
+                span,
+                format!("'{d}' without a matching begin"),
+            ));
         };
         if k != kind {
             self.ctx.warn(span, format!("'{d}' closes a {k:?} block"))?;
@@ -509,7 +623,10 @@ impl Parser {
                     up: DVec3::new(v[6], v[7], v[8]),
                 };
                 let Some(w) = crate::scene::look_at_to_world(&pose) else {
-                    return Err(SpanError::new(span, "degenerate LookAt: eye equals target or up is parallel to the view direction"));
+                    return Err(SpanError::new(
+                        span,
+                        "degenerate LookAt: eye equals target or up is parallel to the view direction",
+                    ));
                 };
                 self.concat(w.inverse());
             }
@@ -519,7 +636,11 @@ impl Parser {
                 a.copy_from_slice(&v);
                 // The 16 numbers are the matrix in column-major order (translation in 12..15).
                 let m = DMat4::from_cols_array(&a);
-                if d == "Transform" { self.set_ctm(m) } else { self.concat(m) }
+                if d == "Transform" {
+                    self.set_ctm(m)
+                } else {
+                    self.concat(m)
+                }
             }
             "CoordinateSystem" => {
                 let (n, _) = self.expect_string(d, span)?;
@@ -529,7 +650,10 @@ impl Parser {
                 let (n, nspan) = self.expect_string(d, span)?;
                 match self.named_coord.get(&n) {
                     Some(m) => self.state.ctm = *m,
-                    None => self.ctx.warn(nspan, format!("unknown coordinate system '{n}'; transform unchanged"))?,
+                    None => self.ctx.warn(
+                        nspan,
+                        format!("unknown coordinate system '{n}'; transform unchanged"),
+                    )?,
                 }
             }
             "ActiveTransform" => {
@@ -539,8 +663,20 @@ impl Parser {
                     Some(("StartTime", _)) => self.state.active = [true, false],
                     Some(("EndTime", _)) => self.state.active = [false, true],
                     Some(("All", _)) => self.state.active = [true, true],
-                    Some((s, sp)) => return Err(SpanError::new(sp, format!("ActiveTransform expects StartTime, EndTime or All, found '{s}'"))),
-                    None => return Err(SpanError::new(self.eof_span(span), "ActiveTransform expects StartTime, EndTime or All")),
+                    Some((s, sp)) => {
+                        return Err(SpanError::new(
+                            sp,
+                            format!(
+                                "ActiveTransform expects StartTime, EndTime or All, found '{s}'"
+                            ),
+                        ));
+                    }
+                    None => {
+                        return Err(SpanError::new(
+                            self.eof_span(span),
+                            "ActiveTransform expects StartTime, EndTime or All",
+                        ));
+                    }
                 }
             }
             "TransformTimes" => {
@@ -553,23 +689,39 @@ impl Parser {
             "AttributeBegin" => self.push_block(Block::Attribute, span),
             "AttributeEnd" => self.pop_block(Block::Attribute, span, d)?,
             "TransformBegin" => {
-                self.ctx.warn(span, "pbrt-v3 'TransformBegin' read as a transform-only push")?;
+                self.ctx.warn(
+                    span,
+                    "pbrt-v3 'TransformBegin' read as a transform-only push",
+                )?;
                 self.push_block(Block::Transform, span);
             }
             "TransformEnd" => {
-                self.ctx.warn(span, "pbrt-v3 'TransformEnd' read as a transform-only pop")?;
+                self.ctx
+                    .warn(span, "pbrt-v3 'TransformEnd' read as a transform-only pop")?;
                 self.pop_block(Block::Transform, span, d)?;
             }
             "Attribute" => {
                 let (target, tspan) = self.expect_string(d, span)?;
                 if !["shape", "light", "material", "medium", "texture"].contains(&target.as_str()) {
-                    return Err(SpanError::new(tspan, format!("Attribute target must be shape, light, material, medium or texture, found '{target}'")));
+                    return Err(SpanError::new(
+                        tspan,
+                        format!(
+                            "Attribute target must be shape, light, material, medium or texture, found '{target}'"
+                        ),
+                    ));
                 }
                 let params = self.params()?;
                 let defs: Vec<ParamDefault> = params
                     .params
                     .into_iter()
-                    .map(|p| ParamDefault { ty: p.ty, name: p.name, nums: p.nums, strs: p.strs, bools: p.bools, span: p.span })
+                    .map(|p| ParamDefault {
+                        ty: p.ty,
+                        name: p.name,
+                        nums: p.nums,
+                        strs: p.strs,
+                        bools: p.bools,
+                        span: p.span,
+                    })
                     .collect();
                 self.state.attributes.push((target, defs));
             }
@@ -579,10 +731,14 @@ impl Parser {
                 }
                 self.in_world = true;
                 self.state.ctm = [DMat4::IDENTITY; 2];
-                self.named_coord.insert("world".into(), [DMat4::IDENTITY; 2]);
+                self.named_coord
+                    .insert("world".into(), [DMat4::IDENTITY; 2]);
             }
             "WorldEnd" => {
-                self.ctx.warn(span, "pbrt-v3 'WorldEnd' ignored (pbrt-v4 ends the world at the end of the file)")?;
+                self.ctx.warn(
+                    span,
+                    "pbrt-v3 'WorldEnd' ignored (pbrt-v4 ends the world at the end of the file)",
+                )?;
             }
             "Camera" => {
                 self.options_only(d, span)?;
@@ -594,7 +750,10 @@ impl Parser {
                 if !world_from_camera.is_finite() {
                     return Err(SpanError::new(span, "the camera transform is singular"));
                 }
-                self.named_coord.insert("camera".into(), [self.state.ctm[0].inverse(), self.state.ctm[1].inverse()]);
+                self.named_coord.insert(
+                    "camera".into(),
+                    [self.state.ctm[0].inverse(), self.state.ctm[1].inverse()],
+                );
                 self.camera = Some((cam, world_from_camera, span));
             }
             "Film" => {
@@ -619,7 +778,10 @@ impl Parser {
             "ColorSpace" => {
                 let (cs, cspan) = self.expect_string(d, span)?;
                 if cs != "srgb" {
-                    self.ctx.warn(cspan, format!("colour space '{cs}' not supported; rgb values are read as sRGB"))?;
+                    self.ctx.warn(
+                        cspan,
+                        format!("colour space '{cs}' not supported; rgb values are read as sRGB"),
+                    )?;
                 }
             }
             "Option" => {
@@ -634,7 +796,10 @@ impl Parser {
                 for p in &params.params {
                     p.used.set(true);
                 }
-                self.ctx.warn(nspan, format!("participating media are not supported; medium '{name}' is ignored"))?;
+                self.ctx.warn(
+                    nspan,
+                    format!("participating media are not supported; medium '{name}' is ignored"),
+                )?;
                 self.media.insert(name);
             }
             "MediumInterface" => {
@@ -656,7 +821,16 @@ impl Parser {
                 let (kind, kspan) = self.expect_string(d, span)?;
                 let (class, cspan) = self.expect_string(d, span)?;
                 let params = self.params()?;
-                to_scene::texture(&mut self.textures, name, &kind, kspan, &class, cspan, &params, &mut self.ctx)?;
+                to_scene::texture(
+                    &mut self.textures,
+                    name,
+                    &kind,
+                    kspan,
+                    &class,
+                    cspan,
+                    &params,
+                    &mut self.ctx,
+                )?;
                 self.check_unused(&params, d)?;
             }
             "Material" => {
@@ -666,7 +840,9 @@ impl Parser {
                 let m = to_scene::material(&ty, tspan, &params, &mut self.ctx, &self.textures)?;
                 self.check_unused(&params, d)?;
                 self.anon_materials += 1;
-                let id = self.scene.material(&format!("{ty}#{}", self.anon_materials), m);
+                let id = self
+                    .scene
+                    .material(&format!("{ty}#{}", self.anon_materials), m);
                 self.state.material = MatRef::Id(id);
             }
             "MakeNamedMaterial" => {
@@ -674,13 +850,19 @@ impl Parser {
                 let (name, nspan) = self.expect_string(d, span)?;
                 let params = self.params_with_attributes("material")?;
                 let Some(ty) = params.string("type")? else {
-                    return Err(SpanError::new(nspan, format!("MakeNamedMaterial '{name}' needs a \"string type\" parameter")));
+                    return Err(SpanError::new(
+                        nspan,
+                        format!("MakeNamedMaterial '{name}' needs a \"string type\" parameter"),
+                    ));
                 };
                 let tspan = params.span_of("type").unwrap_or(nspan);
                 let m = to_scene::material(&ty, tspan, &params, &mut self.ctx, &self.textures)?;
                 self.check_unused(&params, d)?;
                 if !self.defined_materials.insert(name.clone()) {
-                    self.ctx.warn(nspan, format!("named material '{name}' redefined; the last definition is used"))?;
+                    self.ctx.warn(
+                        nspan,
+                        format!("named material '{name}' redefined; the last definition is used"),
+                    )?;
                 }
                 self.pending_materials.remove(&name);
                 self.scene.material(&name, m);
@@ -694,7 +876,8 @@ impl Parser {
                 self.world_only(d, span)?;
                 let (ty, tspan) = self.expect_string(d, span)?;
                 let params = self.params_with_attributes("light")?;
-                let light = to_scene::light(&ty, tspan, &params, &mut self.ctx, &self.state.ctm[0])?;
+                let light =
+                    to_scene::light(&ty, tspan, &params, &mut self.ctx, &self.state.ctm[0])?;
                 self.check_unused(&params, d)?;
                 if let Some(l) = light {
                     self.scene.lights.push(l);
@@ -718,11 +901,17 @@ impl Parser {
                 self.world_only(d, span)?;
                 let (name, nspan) = self.expect_string(d, span)?;
                 if self.object_def.is_some() {
-                    return Err(SpanError::new(span, "ObjectBegin inside another object definition"));
+                    return Err(SpanError::new(
+                        span,
+                        "ObjectBegin inside another object definition",
+                    ));
                 }
                 self.push_block(Block::Object, span);
                 if self.objects.contains_key(&name) {
-                    self.ctx.warn(nspan, format!("object '{name}' redefined; the last definition is used"))?;
+                    self.ctx.warn(
+                        nspan,
+                        format!("object '{name}' redefined; the last definition is used"),
+                    )?;
                 }
                 self.object_def = Some((name, vec![], nspan));
             }
@@ -738,7 +927,10 @@ impl Parser {
                 self.world_only(d, span)?;
                 let (name, nspan) = self.expect_string(d, span)?;
                 if self.object_def.is_some() {
-                    return Err(SpanError::new(span, "ObjectInstance inside an object definition"));
+                    return Err(SpanError::new(
+                        span,
+                        "ObjectInstance inside an object definition",
+                    ));
                 }
                 let Some(meshes) = self.objects.get(&name) else {
                     let mut e = SpanError::new(nspan, format!("unknown object '{name}'"));
@@ -747,14 +939,22 @@ impl Parser {
                     return Err(e);
                 };
                 if meshes.is_empty() {
-                    self.ctx.warn(nspan, format!("object '{name}' has no shapes; instance skipped"))?;
+                    self.ctx.warn(
+                        nspan,
+                        format!("object '{name}' has no shapes; instance skipped"),
+                    )?;
                 } else {
-                    self.scene.instances.push(Instance { prototype: meshes.clone(), to_world: self.state.ctm[0], object: None });
+                    self.scene.instances.push(Instance {
+                        prototype: meshes.clone(),
+                        to_world: self.state.ctm[0],
+                        object: None,
+                    });
                 }
             }
             _ => {
                 let mut e = SpanError::new(span, format!("unknown directive '{d}'"));
-                e.help = suggest(d, DIRECTIVES.iter().copied()).map(|s| format!("did you mean '{s}'?"));
+                e.help =
+                    suggest(d, DIRECTIVES.iter().copied()).map(|s| format!("did you mean '{s}'?"));
                 return Err(e);
             }
         }
@@ -797,28 +997,41 @@ impl Parser {
     fn include(&mut self, file: &str, fspan: Span) -> PResult<()> {
         let path = self.ctx.resolve_path(file);
         if self.stack.len() >= MAX_INCLUDE_DEPTH {
-            return Err(SpanError::new(fspan, format!("includes nested deeper than {MAX_INCLUDE_DEPTH} levels")));
+            return Err(SpanError::new(
+                fspan,
+                format!("includes nested deeper than {MAX_INCLUDE_DEPTH} levels"),
+            ));
         }
         let canon = std::fs::canonicalize(&path).map_err(|e| {
             SpanError::new(fspan, format!("cannot include '{}': {e}", path.display()))
         })?;
         if self.active_paths.contains(&canon) {
-            return Err(SpanError::new(fspan, format!("include cycle: '{}' is already being read", path.display())));
+            return Err(SpanError::new(
+                fspan,
+                format!("include cycle: '{}' is already being read", path.display()),
+            ));
         }
         let text = read_source(&path).map_err(|m| SpanError::new(fspan, m))?;
         // A peeked token belongs to the including file; it was consumed by expect_string, so none is pending.
         debug_assert!(self.peeked.is_none());
         self.files.push(SourceFile { path, text });
-        self.stack.push(Lexer::new((self.files.len() - 1) as FileId));
+        self.stack
+            .push(Lexer::new((self.files.len() - 1) as FileId));
         self.active_paths.push(canon);
         Ok(())
     }
 
     fn material_id(&mut self) -> PResult<(MaterialId, Option<String>)> {
         Ok(match self.state.material.clone() {
-            MatRef::Default => (self.scene.material("(default)", crate::scene::Material::Diffuse {
-                reflectance: crate::spectrum::Spectrum::constant("default", 0.5),
-            }), None),
+            MatRef::Default => (
+                self.scene.material(
+                    "(default)",
+                    crate::scene::Material::Diffuse {
+                        reflectance: crate::spectrum::Spectrum::constant("default", 0.5),
+                    },
+                ),
+                None,
+            ),
             MatRef::Id(id) => (id, None),
             MatRef::Named(name, nspan) => {
                 if !self.defined_materials.contains(&name) {
@@ -827,12 +1040,20 @@ impl Parser {
                     if let Some(i) = self.scene.materials.iter().position(|m| m.name == name) {
                         return Ok((i as MaterialId, Some(name)));
                     }
-                    let id = self.scene.material(&name, crate::scene::Material::Diffuse {
-                        reflectance: crate::spectrum::Spectrum::constant("placeholder", 0.5),
-                    });
+                    let id = self.scene.material(
+                        &name,
+                        crate::scene::Material::Diffuse {
+                            reflectance: crate::spectrum::Spectrum::constant("placeholder", 0.5),
+                        },
+                    );
                     return Ok((id, Some(name)));
                 }
-                let i = self.scene.materials.iter().position(|m| m.name == name).expect("defined");
+                let i = self
+                    .scene
+                    .materials
+                    .iter()
+                    .position(|m| m.name == name)
+                    .expect("defined");
                 (i as MaterialId, Some(name))
             }
         })
@@ -864,12 +1085,18 @@ impl Parser {
         let label = self.label(mname.as_deref());
         self.shape_count += 1;
         if self.state.ctm[0] != self.state.ctm[1] {
-            self.ctx.warn(tspan, "animated transforms are not supported; the start transform is used")?;
+            self.ctx.warn(
+                tspan,
+                "animated transforms are not supported; the start transform is used",
+            )?;
         }
         let in_object = self.object_def.is_some();
         let mut area = self.state.area_light.clone();
         if in_object && area.is_some() {
-            self.ctx.warn(tspan, "area lights inside object instances are not supported; emission ignored")?;
+            self.ctx.warn(
+                tspan,
+                "area lights inside object instances are not supported; emission ignored",
+            )?;
             area = None;
         }
         let object = self.scene.object(&label);
@@ -907,21 +1134,34 @@ impl Parser {
         }
         if let Some((_, k, span)) = self.state_stack.last() {
             let span = *span;
-            self.ctx.warn(span, format!("{k:?}Begin without a matching End at the end of the file"))?;
+            self.ctx.warn(
+                span,
+                format!("{k:?}Begin without a matching End at the end of the file"),
+            )?;
         }
         if let Some((name, span)) = self.pending_materials.iter().next() {
-            let mut e = SpanError::new(*span, format!("named material '{name}' is used but never defined"));
+            let mut e = SpanError::new(
+                *span,
+                format!("named material '{name}' is used but never defined"),
+            );
             e.help = suggest(name, self.defined_materials.iter().map(|s| s.as_str()))
                 .map(|s| format!("did you mean '{s}'?"));
             return Err(e);
         }
         if !self.in_world && (self.camera.is_some() || self.film.is_some()) {
-            self.ctx.warn(Span::default(), "the file has no WorldBegin")?;
+            self.ctx
+                .warn(Span::default(), "the file has no WorldBegin")?;
         }
         let film = self.film.clone().unwrap_or_default();
         self.scene.film = Some(film.spec.clone());
         if let Some((cam, to_world, span)) = self.camera.clone() {
-            self.scene.camera = Some(to_scene::camera(&cam, to_world, &film, span, &mut self.ctx)?);
+            self.scene.camera = Some(to_scene::camera(
+                &cam,
+                to_world,
+                &film,
+                span,
+                &mut self.ctx,
+            )?);
         }
         Ok(())
     }
@@ -929,7 +1169,8 @@ impl Parser {
 
 /// Read a scene file (UTF-8; `.gz` decompressed).
 pub fn read_source(path: &Path) -> Result<String, String> {
-    let bytes = std::fs::read(path).map_err(|e| format!("cannot read '{}': {e}", path.display()))?;
+    let bytes =
+        std::fs::read(path).map_err(|e| format!("cannot read '{}': {e}", path.display()))?;
     let bytes = if path.extension().is_some_and(|e| e == "gz") {
         use std::io::Read;
         let mut out = vec![];

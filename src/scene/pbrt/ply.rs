@@ -76,7 +76,9 @@ impl Reader<'_> {
     fn read(&mut self, t: Scalar) -> Result<f64, String> {
         if self.fmt == Format::Ascii {
             let w = self.ascii_word()?;
-            return w.parse::<f64>().map_err(|_| format!("'{w}' is not a number"));
+            return w
+                .parse::<f64>()
+                .map_err(|_| format!("'{w}' is not a number"));
         }
         let n = match t {
             Scalar::I8 | Scalar::U8 => 1,
@@ -108,12 +110,16 @@ impl Reader<'_> {
 
 /// Read a PLY file into an object-space mesh.
 pub fn read(path: &Path) -> Result<RawMesh, String> {
-    let data = std::fs::read(path).map_err(|e| format!("cannot read PLY file '{}': {e}", path.display()))?;
+    let data = std::fs::read(path)
+        .map_err(|e| format!("cannot read PLY file '{}': {e}", path.display()))?;
     parse(&data).map_err(|m| format!("{}: {m}", path.display()))
 }
 
 pub fn parse(data: &[u8]) -> Result<RawMesh, String> {
-    let end = data.windows(10).position(|w| w == b"end_header").ok_or("no 'end_header' in PLY header")?;
+    let end = data
+        .windows(10)
+        .position(|w| w == b"end_header")
+        .ok_or("no 'end_header' in PLY header")?;
     let header = std::str::from_utf8(&data[..end]).map_err(|_| "PLY header is not text")?;
     let mut body = end + 10;
     while body < data.len() && data[body] != b'\n' {
@@ -139,7 +145,9 @@ pub fn parse(data: &[u8]) -> Result<RawMesh, String> {
             }
             ["element", name, count] => elements.push(Element {
                 name: name.to_string(),
-                count: count.parse().map_err(|_| format!("bad element count '{count}'"))?,
+                count: count
+                    .parse()
+                    .map_err(|_| format!("bad element count '{count}'"))?,
                 props: vec![],
             }),
             ["property", "list", ct, it, name] => {
@@ -152,14 +160,21 @@ pub fn parse(data: &[u8]) -> Result<RawMesh, String> {
             }
             ["property", t, name] => {
                 let e = elements.last_mut().ok_or("property before element")?;
-                e.props.push(Prop::Scalar(scalar(t).ok_or(format!("unknown type '{t}'"))?, name.to_string()));
+                e.props.push(Prop::Scalar(
+                    scalar(t).ok_or(format!("unknown type '{t}'"))?,
+                    name.to_string(),
+                ));
             }
             ["comment", ..] | ["obj_info", ..] | [] => {}
             _ => return Err(format!("unrecognised PLY header line '{line}'")),
         }
     }
     let fmt = fmt.ok_or("PLY header has no 'format' line")?;
-    let mut r = Reader { data, pos: body.min(data.len()), fmt };
+    let mut r = Reader {
+        data,
+        pos: body.min(data.len()),
+        fmt,
+    };
     let mut p = vec![];
     let mut n = vec![];
     let mut uv = vec![];
@@ -197,8 +212,11 @@ pub fn parse(data: &[u8]) -> Result<RawMesh, String> {
                         for _ in 0..k as usize {
                             idx.push(r.read(*it)?);
                         }
-                        if e.name == "face" && (name == "vertex_indices" || name == "vertex_index") {
-                            let ok = idx.iter().all(|&i| i >= 0.0 && i.fract() == 0.0 && i < u32::MAX as f64);
+                        if e.name == "face" && (name == "vertex_indices" || name == "vertex_index")
+                        {
+                            let ok = idx
+                                .iter()
+                                .all(|&i| i >= 0.0 && i.fract() == 0.0 && i < u32::MAX as f64);
                             if !ok {
                                 return Err("negative or non-integer face index".into());
                             }
@@ -209,7 +227,11 @@ pub fn parse(data: &[u8]) -> Result<RawMesh, String> {
                                     tri.push([u[0], u[1], u[2]]);
                                     tri.push([u[0], u[2], u[3]]);
                                 }
-                                k => return Err(format!("face with {k} vertices (3 or 4 supported)")),
+                                k => {
+                                    return Err(format!(
+                                        "face with {k} vertices (3 or 4 supported)"
+                                    ));
+                                }
                             }
                         }
                     }
@@ -230,10 +252,18 @@ pub fn parse(data: &[u8]) -> Result<RawMesh, String> {
         }
     }
     if let Some(bad) = tri.iter().flatten().find(|&&i| i as usize >= p.len()) {
-        return Err(format!("face index {bad} out of range ({} vertices)", p.len()));
+        return Err(format!(
+            "face index {bad} out of range ({} vertices)",
+            p.len()
+        ));
     }
     let nv = p.len();
-    Ok(RawMesh { p, n: (n.len() == nv && nv > 0).then_some(n), uv: (uv.len() == nv && nv > 0).then_some(uv), tri })
+    Ok(RawMesh {
+        p,
+        n: (n.len() == nv && nv > 0).then_some(n),
+        uv: (uv.len() == nv && nv > 0).then_some(uv),
+        tri,
+    })
 }
 
 #[cfg(test)]

@@ -49,11 +49,18 @@ pub fn loop_once(p: &[DVec3], tri: &[[u32; 3]]) -> (Vec<DVec3>, Vec<[u32; 3]>) {
             match boundary_nb[i].len() {
                 0 => {
                     let k = neighbours[i].len() as f64;
-                    let beta = if neighbours[i].len() == 3 { 3.0 / 16.0 } else { 3.0 / (8.0 * k) };
+                    let beta = if neighbours[i].len() == 3 {
+                        3.0 / 16.0
+                    } else {
+                        3.0 / (8.0 * k)
+                    };
                     let sum: DVec3 = neighbours[i].iter().map(|&j| p[j as usize]).sum();
                     (1.0 - k * beta) * v + beta * sum
                 }
-                2 => 0.75 * v + 0.125 * (p[boundary_nb[i][0] as usize] + p[boundary_nb[i][1] as usize]),
+                2 => {
+                    0.75 * v
+                        + 0.125 * (p[boundary_nb[i][0] as usize] + p[boundary_nb[i][1] as usize])
+                }
                 _ => v,
             }
         })
@@ -88,7 +95,12 @@ mod tests {
     use super::*;
     #[test]
     fn tetrahedron_counts_and_positions() {
-        let p = vec![DVec3::new(1.0, 1.0, 1.0), DVec3::new(1.0, -1.0, -1.0), DVec3::new(-1.0, 1.0, -1.0), DVec3::new(-1.0, -1.0, 1.0)];
+        let p = vec![
+            DVec3::new(1.0, 1.0, 1.0),
+            DVec3::new(1.0, -1.0, -1.0),
+            DVec3::new(-1.0, 1.0, -1.0),
+            DVec3::new(-1.0, -1.0, 1.0),
+        ];
         let t = vec![[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]];
         let (q, tt) = loop_once(&p, &t);
         assert_eq!(q.len(), 10);
@@ -96,6 +108,9 @@ mod tests {
         // valence 3, β = 3/16: v' = (1 − 9/16) v + 3/16 Σ others = 7/16 v − 3/16 v = v/4 (Σ all = 0).
         assert!((q[0] - p[0] * 0.25).length() < 1e-12);
         // edge (0,1): 3/8 (p0+p1) + 1/8 (p2+p3) = 3/8 (2,0,0) + 1/8 (-2,0,0) = (0.5,0,0)
-        assert!(q.iter().any(|v| (*v - DVec3::new(0.5, 0.0, 0.0)).length() < 1e-12));
+        assert!(
+            q.iter()
+                .any(|v| (*v - DVec3::new(0.5, 0.0, 0.0)).length() < 1e-12)
+        );
     }
 }

@@ -30,7 +30,10 @@
 
 use super::lexer::Span;
 use super::params::{Ctx, PResult, ParamList, ParamType, SpanError, SpectrumKind, luminance_y};
-use crate::scene::{CameraModel, CameraSpec, Disk, Emission, FilmSpec, Light, Material, MaterialId, Mesh, ObjectId, Sphere};
+use crate::scene::{
+    CameraModel, CameraSpec, Disk, Emission, FilmSpec, Light, Material, MaterialId, Mesh, ObjectId,
+    Sphere,
+};
 use crate::spectrum::{Extrapolation, Spectrum};
 use glam::{DMat3, DMat4, DVec3, Vec2, Vec3};
 use std::collections::HashMap;
@@ -54,8 +57,16 @@ pub struct AreaLightSpec {
 
 #[derive(Clone, Debug)]
 pub enum CameraParams {
-    Perspective { fov_deg: f64, lens_radius: f64, focal_distance: f64 },
-    Realistic { lens_file: std::path::PathBuf, aperture_diameter_mm: f64, focus_distance_m: f64 },
+    Perspective {
+        fov_deg: f64,
+        lens_radius: f64,
+        focal_distance: f64,
+    },
+    Realistic {
+        lens_file: std::path::PathBuf,
+        aperture_diameter_mm: f64,
+        focus_distance_m: f64,
+    },
 }
 
 #[derive(Clone, Debug)]
@@ -69,7 +80,12 @@ impl Default for FilmParams {
         // pbrt-v4 defaults: 1280×720, 35 mm diagonal.
         let (w, h, diag) = (1280u32, 720u32, 35.0);
         Self {
-            spec: FilmSpec { width_px: w, height_px: h, pixel_pitch_m: diag * 1e-3 / (w as f64).hypot(h as f64), crop_window: None },
+            spec: FilmSpec {
+                width_px: w,
+                height_px: h,
+                pixel_pitch_m: diag * 1e-3 / (w as f64).hypot(h as f64),
+                crop_window: None,
+            },
             diagonal_mm: diag,
         }
     }
@@ -79,33 +95,57 @@ pub fn camera_params(ty: &str, tspan: Span, p: &ParamList, ctx: &mut Ctx) -> PRe
     match ty {
         "perspective" | "orthographic" | "spherical" => {
             if ty != "perspective" {
-                ctx.warn(tspan, format!("camera '{ty}' not supported; a perspective camera is used"))?;
+                ctx.warn(
+                    tspan,
+                    format!("camera '{ty}' not supported; a perspective camera is used"),
+                )?;
             }
             let fov = p.float("fov", 90.0)?;
             if !(fov > 0.0 && fov < 180.0) {
-                return Err(SpanError::new(p.span_of("fov").unwrap_or(tspan), format!("fov must be in (0, 180) degrees, got {fov}")));
+                return Err(SpanError::new(
+                    p.span_of("fov").unwrap_or(tspan),
+                    format!("fov must be in (0, 180) degrees, got {fov}"),
+                ));
             }
             let lr = p.float("lensradius", 0.0)?;
             let fd = p.float("focaldistance", 1e6)?;
             if lr < 0.0 || fd <= 0.0 {
-                return Err(SpanError::new(tspan, "lensradius must be ≥ 0 and focaldistance > 0"));
+                return Err(SpanError::new(
+                    tspan,
+                    "lensradius must be ≥ 0 and focaldistance > 0",
+                ));
             }
-            for n in ["frameaspectratio", "screenwindow", "shutteropen", "shutterclose"] {
+            for n in [
+                "frameaspectratio",
+                "screenwindow",
+                "shutteropen",
+                "shutterclose",
+            ] {
                 if let Some(s) = p.span_of(n) {
                     p.find(n);
                     ctx.warn(s, format!("camera parameter '{n}' is ignored"))?;
                 }
             }
-            Ok(CameraParams::Perspective { fov_deg: fov, lens_radius: lr, focal_distance: fd })
+            Ok(CameraParams::Perspective {
+                fov_deg: fov,
+                lens_radius: lr,
+                focal_distance: fd,
+            })
         }
         "realistic" => {
             let Some(f) = p.string("lensfile")? else {
-                return Err(SpanError::new(tspan, "realistic camera needs \"string lensfile\""));
+                return Err(SpanError::new(
+                    tspan,
+                    "realistic camera needs \"string lensfile\"",
+                ));
             };
             let ad = p.float("aperturediameter", 1.0)?;
             let fd = p.float("focusdistance", 10.0)?;
             if ad <= 0.0 || fd <= 0.0 {
-                return Err(SpanError::new(tspan, "aperturediameter and focusdistance must be > 0"));
+                return Err(SpanError::new(
+                    tspan,
+                    "aperturediameter and focusdistance must be > 0",
+                ));
             }
             for n in ["aperture", "shutteropen", "shutterclose"] {
                 if let Some(s) = p.span_of(n) {
@@ -113,24 +153,53 @@ pub fn camera_params(ty: &str, tspan: Span, p: &ParamList, ctx: &mut Ctx) -> PRe
                     ctx.warn(s, format!("camera parameter '{n}' is ignored"))?;
                 }
             }
-            Ok(CameraParams::Realistic { lens_file: ctx.resolve_path(&f), aperture_diameter_mm: ad, focus_distance_m: fd })
+            Ok(CameraParams::Realistic {
+                lens_file: ctx.resolve_path(&f),
+                aperture_diameter_mm: ad,
+                focus_distance_m: fd,
+            })
         }
-        _ => Err(SpanError::new(tspan, format!("unknown camera '{ty}' (perspective, orthographic, realistic, spherical)"))),
+        _ => Err(SpanError::new(
+            tspan,
+            format!("unknown camera '{ty}' (perspective, orthographic, realistic, spherical)"),
+        )),
     }
 }
 
-pub fn camera(c: &CameraParams, to_world: DMat4, film: &FilmParams, _span: Span, _ctx: &mut Ctx) -> PResult<CameraSpec> {
+pub fn camera(
+    c: &CameraParams,
+    to_world: DMat4,
+    film: &FilmParams,
+    _span: Span,
+    _ctx: &mut Ctx,
+) -> PResult<CameraSpec> {
     let model = match c {
-        CameraParams::Perspective { fov_deg, lens_radius, focal_distance } => {
+        CameraParams::Perspective {
+            fov_deg,
+            lens_radius,
+            focal_distance,
+        } => {
             if *lens_radius > 0.0 {
-                let short_m = film.spec.width_px.min(film.spec.height_px) as f64 * film.spec.pixel_pitch_m;
+                let short_m =
+                    film.spec.width_px.min(film.spec.height_px) as f64 * film.spec.pixel_pitch_m;
                 let f = 0.5 * short_m / (0.5 * fov_deg.to_radians()).tan();
-                CameraModel::ThinLens { focal_length_m: f, f_number: f / (2.0 * lens_radius), focus_distance_m: *focal_distance }
+                CameraModel::ThinLens {
+                    focal_length_m: f,
+                    f_number: f / (2.0 * lens_radius),
+                    focus_distance_m: *focal_distance,
+                }
             } else {
-                CameraModel::Pinhole { fov_deg: *fov_deg, f_number: PI.sqrt() / 2.0 }
+                CameraModel::Pinhole {
+                    fov_deg: *fov_deg,
+                    f_number: PI.sqrt() / 2.0,
+                }
             }
         }
-        CameraParams::Realistic { lens_file, aperture_diameter_mm, focus_distance_m } => CameraModel::LensFile {
+        CameraParams::Realistic {
+            lens_file,
+            aperture_diameter_mm,
+            focus_distance_m,
+        } => CameraModel::LensFile {
             path: lens_file.clone(),
             film_distance_m: None,
             focus_distance_m: Some(*focus_distance_m),
@@ -144,38 +213,74 @@ pub fn film_params(ty: &str, tspan: Span, p: &ParamList, ctx: &mut Ctx) -> PResu
     match ty {
         "rgb" | "gbuffer" | "spectral" => {}
         "image" => ctx.warn(tspan, "pbrt-v3 film 'image' read as pbrt-v4 'rgb'")?,
-        _ => return Err(SpanError::new(tspan, format!("unknown film '{ty}' (rgb, gbuffer, spectral)"))),
+        _ => {
+            return Err(SpanError::new(
+                tspan,
+                format!("unknown film '{ty}' (rgb, gbuffer, spectral)"),
+            ));
+        }
     }
     let w = p.int("xresolution", 1280)?;
     let h = p.int("yresolution", 720)?;
     if !(1..=1_000_000).contains(&w) || !(1..=1_000_000).contains(&h) {
-        return Err(SpanError::new(tspan, format!("film resolution must be 1..1000000 pixels, got {w}×{h}")));
+        return Err(SpanError::new(
+            tspan,
+            format!("film resolution must be 1..1000000 pixels, got {w}×{h}"),
+        ));
     }
     let diag = p.float("diagonal", 35.0)?;
     if !(diag > 0.0) {
-        return Err(SpanError::new(p.span_of("diagonal").unwrap_or(tspan), "film diagonal must be > 0 mm"));
+        return Err(SpanError::new(
+            p.span_of("diagonal").unwrap_or(tspan),
+            "film diagonal must be > 0 mm",
+        ));
     }
     let crop = match p.floats("cropwindow")? {
         None => None,
         Some(c) if c.len() == 4 => {
             let ok = c.iter().all(|v| (0.0..=1.0).contains(v)) && c[0] < c[1] && c[2] < c[3];
             if !ok {
-                return Err(SpanError::new(p.span_of("cropwindow").unwrap(), "cropwindow must be [x0 x1 y0 y1] with 0 ≤ x0 < x1 ≤ 1, 0 ≤ y0 < y1 ≤ 1"));
+                return Err(SpanError::new(
+                    p.span_of("cropwindow").unwrap(),
+                    "cropwindow must be [x0 x1 y0 y1] with 0 ≤ x0 < x1 ≤ 1, 0 ≤ y0 < y1 ≤ 1",
+                ));
             }
             Some([c[0], c[1], c[2], c[3]])
         }
-        Some(_) => return Err(SpanError::new(p.span_of("cropwindow").unwrap(), "cropwindow needs 4 values")),
+        Some(_) => {
+            return Err(SpanError::new(
+                p.span_of("cropwindow").unwrap(),
+                "cropwindow needs 4 values",
+            ));
+        }
     };
     // Output-only settings (file name, sensor response, white balance) do not affect the scene.
-    for n in ["filename", "iso", "whitebalance", "sensor", "savefp16", "maxcomponentvalue", "exposuretime", "writefp16"] {
+    for n in [
+        "filename",
+        "iso",
+        "whitebalance",
+        "sensor",
+        "savefp16",
+        "maxcomponentvalue",
+        "exposuretime",
+        "writefp16",
+    ] {
         p.find(n);
     }
     if let Some(s) = p.span_of("pixelbounds") {
         p.find("pixelbounds");
         ctx.warn(s, "film 'pixelbounds' ignored (use cropwindow)")?;
     }
-    let spec = FilmSpec { width_px: w as u32, height_px: h as u32, pixel_pitch_m: diag * 1e-3 / (w as f64).hypot(h as f64), crop_window: crop };
-    Ok(FilmParams { spec, diagonal_mm: diag })
+    let spec = FilmSpec {
+        width_px: w as u32,
+        height_px: h as u32,
+        pixel_pitch_m: diag * 1e-3 / (w as f64).hypot(h as f64),
+        crop_window: crop,
+    };
+    Ok(FilmParams {
+        spec,
+        diagonal_mm: diag,
+    })
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -190,15 +295,18 @@ pub fn texture(
     ctx: &mut Ctx,
 ) -> PResult<()> {
     if kind != "spectrum" && kind != "float" && kind != "color" {
-        return Err(SpanError::new(kspan, format!("texture type must be \"spectrum\" or \"float\", found \"{kind}\"")));
+        return Err(SpanError::new(
+            kspan,
+            format!("texture type must be \"spectrum\" or \"float\", found \"{kind}\""),
+        ));
     }
     let value = if class == "constant" {
-        let v = if kind == "float" {
+        if kind == "float" {
             Some(Spectrum::constant(name.clone(), p.float("value", 1.0)?))
         } else {
-            p.spectrum("value", SpectrumKind::Albedo, ctx)?.or_else(|| Some(Spectrum::constant(name.clone(), 1.0)))
-        };
-        v
+            p.spectrum("value", SpectrumKind::Albedo, ctx)?
+                .or_else(|| Some(Spectrum::constant(name.clone(), 1.0)))
+        }
     } else {
         for q in &p.params {
             q.used.set(true);
@@ -222,7 +330,9 @@ fn spectrum_or_texture(
         if let Some((t, tspan)) = p.texture_name(n) {
             return match tex.map.get(&t) {
                 Some((Some(s), _)) => Ok(s.clone()),
-                Some((None, _)) => Ok(Spectrum::constant(*n, default).with_extrapolation(Extrapolation::Clamp)),
+                Some((None, _)) => {
+                    Ok(Spectrum::constant(*n, default).with_extrapolation(Extrapolation::Clamp))
+                }
                 None => Err(SpanError::new(tspan, format!("unknown texture '{t}'"))),
             };
         }
@@ -243,7 +353,10 @@ fn roughness_alpha(p: &ParamList, default: f64, v3: bool) -> PResult<f64> {
     let r = 0.5 * (u + v);
     let remap = p.bool("remaproughness", true)?;
     if !(r >= 0.0) {
-        return Err(SpanError::new(p.span_of("roughness").unwrap_or_default(), "roughness must be ≥ 0"));
+        return Err(SpanError::new(
+            p.span_of("roughness").unwrap_or_default(),
+            "roughness must be ≥ 0",
+        ));
     }
     Ok(if !remap {
         r
@@ -259,7 +372,9 @@ fn roughness_alpha(p: &ParamList, default: f64, v3: bool) -> PResult<f64> {
 fn eta_spectrum(p: &ParamList, names: &[&str], default: f64, ctx: &mut Ctx) -> PResult<Spectrum> {
     for n in names {
         if p.has(n) {
-            return Ok(p.spectrum(n, SpectrumKind::Unbounded, ctx)?.unwrap_or_else(|| Spectrum::constant("eta", default)));
+            return Ok(p
+                .spectrum(n, SpectrumKind::Unbounded, ctx)?
+                .unwrap_or_else(|| Spectrum::constant("eta", default)));
         }
     }
     Ok(Spectrum::constant("eta", default))
@@ -271,7 +386,13 @@ fn mark_used(p: &ParamList, names: &[&str]) {
     }
 }
 
-pub fn material(ty: &str, tspan: Span, p: &ParamList, ctx: &mut Ctx, tex: &Textures) -> PResult<Material> {
+pub fn material(
+    ty: &str,
+    tspan: Span,
+    p: &ParamList,
+    ctx: &mut Ctx,
+    tex: &Textures,
+) -> PResult<Material> {
     mark_used(p, &["type", "displacement", "normalmap"]);
     Ok(match ty {
         "diffuse" | "matte" => {
@@ -279,20 +400,38 @@ pub fn material(ty: &str, tspan: Span, p: &ParamList, ctx: &mut Ctx, tex: &Textu
                 ctx.warn(tspan, "pbrt-v3 material 'matte' read as 'diffuse'")?;
                 mark_used(p, &["sigma"]);
             }
-            let names: &[&str] = if ty == "matte" { &["Kd"] } else { &["reflectance"] };
-            Material::Diffuse { reflectance: spectrum_or_texture(p, names, SpectrumKind::Albedo, 0.5, ctx, tex)? }
+            let names: &[&str] = if ty == "matte" {
+                &["Kd"]
+            } else {
+                &["reflectance"]
+            };
+            Material::Diffuse {
+                reflectance: spectrum_or_texture(p, names, SpectrumKind::Albedo, 0.5, ctx, tex)?,
+            }
         }
         "coateddiffuse" => {
-            let refl = spectrum_or_texture(p, &["reflectance"], SpectrumKind::Albedo, 0.5, ctx, tex)?;
+            let refl =
+                spectrum_or_texture(p, &["reflectance"], SpectrumKind::Albedo, 0.5, ctx, tex)?;
             let alpha = roughness_alpha(p, 0.0, false)?;
             let eta = p.float("interface.eta", p.float("eta", 1.5)?)?;
             mark_used(p, &["thickness", "albedo", "g", "maxdepth", "nsamples"]);
             let f0 = ((eta - 1.0) / (eta + 1.0)).powi(2);
-            Material::DiffuseSpecular { diffuse: refl, specular: Spectrum::constant("coating-f0", f0), roughness: alpha }
+            Material::DiffuseSpecular {
+                diffuse: refl,
+                specular: Spectrum::constant("coating-f0", f0),
+                roughness: alpha,
+            }
         }
         "uber" | "plastic" | "substrate" => {
             ctx.warn(tspan, format!("pbrt-v3 material '{ty}' read as diffuse + specular (Kd, Ks; other lobes ignored)"))?;
-            let kd = spectrum_or_texture(p, &["Kd"], SpectrumKind::Albedo, if ty == "substrate" { 0.5 } else { 0.25 }, ctx, tex)?;
+            let kd = spectrum_or_texture(
+                p,
+                &["Kd"],
+                SpectrumKind::Albedo,
+                if ty == "substrate" { 0.5 } else { 0.25 },
+                ctx,
+                tex,
+            )?;
             let ks = spectrum_or_texture(p, &["Ks"], SpectrumKind::Albedo, 0.25, ctx, tex)?;
             let alpha = roughness_alpha(p, 0.1, true)?;
             mark_used(p, &["index", "eta", "opacity", "bumpmap"]);
@@ -300,11 +439,18 @@ pub fn material(ty: &str, tspan: Span, p: &ParamList, ctx: &mut Ctx, tex: &Textu
                 if p.has(n) {
                     let s = spectrum_or_texture(p, &[n], SpectrumKind::Albedo, 0.0, ctx, tex)?;
                     if s.values.iter().any(|&v| v > 0.0) {
-                        ctx.warn(p.span_of(n).unwrap_or(tspan), format!("uber '{n}' (perfect specular lobe) ignored"))?;
+                        ctx.warn(
+                            p.span_of(n).unwrap_or(tspan),
+                            format!("uber '{n}' (perfect specular lobe) ignored"),
+                        )?;
                     }
                 }
             }
-            Material::DiffuseSpecular { diffuse: kd, specular: ks, roughness: alpha }
+            Material::DiffuseSpecular {
+                diffuse: kd,
+                specular: ks,
+                roughness: alpha,
+            }
         }
         "conductor" | "metal" => {
             let v3 = ty == "metal";
@@ -313,12 +459,21 @@ pub fn material(ty: &str, tspan: Span, p: &ParamList, ctx: &mut Ctx, tex: &Textu
             }
             let alpha = roughness_alpha(p, if v3 { 0.01 } else { 0.0 }, v3)?;
             if p.has("reflectance") {
-                let r = spectrum_or_texture(p, &["reflectance"], SpectrumKind::Albedo, 1.0, ctx, tex)?;
-                let k_vals = r.values.iter().map(|&v| 2.0 * (v.clamp(0.0, 0.9999) / (1.0 - v.clamp(0.0, 0.9999))).sqrt()).collect();
+                let r =
+                    spectrum_or_texture(p, &["reflectance"], SpectrumKind::Albedo, 1.0, ctx, tex)?;
+                let k_vals = r
+                    .values
+                    .iter()
+                    .map(|&v| 2.0 * (v.clamp(0.0, 0.9999) / (1.0 - v.clamp(0.0, 0.9999))).sqrt())
+                    .collect();
                 let k = Spectrum::new("k", r.wavelengths_nm.clone(), k_vals)
                     .map_err(|m| SpanError::new(tspan, m))?
                     .with_extrapolation(Extrapolation::Clamp);
-                Material::Conductor { eta: Spectrum::constant("eta", 1.0), k, roughness: alpha }
+                Material::Conductor {
+                    eta: Spectrum::constant("eta", 1.0),
+                    k,
+                    roughness: alpha,
+                }
             } else {
                 let eta = p.spectrum("eta", SpectrumKind::Unbounded, ctx)?;
                 let k = p.spectrum("k", SpectrumKind::Unbounded, ctx)?;
@@ -326,10 +481,17 @@ pub fn material(ty: &str, tspan: Span, p: &ParamList, ctx: &mut Ctx, tex: &Textu
                     (Some(e), Some(k)) => (e, k),
                     (e, k) => {
                         ctx.warn(tspan, "conductor without built-in eta/k (pbrt's default is metal-Cu, not built in); using eta 0.2, k 3.0 (normal-incidence reflectance 0.92)")?;
-                        (e.unwrap_or(Spectrum::constant("eta", 0.2)), k.unwrap_or(Spectrum::constant("k", 3.0)))
+                        (
+                            e.unwrap_or(Spectrum::constant("eta", 0.2)),
+                            k.unwrap_or(Spectrum::constant("k", 3.0)),
+                        )
                     }
                 };
-                Material::Conductor { eta, k, roughness: alpha }
+                Material::Conductor {
+                    eta,
+                    k,
+                    roughness: alpha,
+                }
             }
         }
         "dielectric" | "glass" | "thindielectric" => {
@@ -349,15 +511,24 @@ pub fn material(ty: &str, tspan: Span, p: &ParamList, ctx: &mut Ctx, tex: &Textu
         }
         "mirror" => {
             ctx.warn(tspan, "pbrt-v3 material 'mirror' read as a perfect mirror")?;
-            Material::Mirror { reflectance: spectrum_or_texture(p, &["Kr"], SpectrumKind::Albedo, 0.9, ctx, tex)? }
+            Material::Mirror {
+                reflectance: spectrum_or_texture(p, &["Kr"], SpectrumKind::Albedo, 0.9, ctx, tex)?,
+            }
         }
-        "interface" | "none" | "" => Material::Dielectric { ior: Spectrum::constant("index-matched", 1.0) },
+        "interface" | "none" | "" => Material::Dielectric {
+            ior: Spectrum::constant("index-matched", 1.0),
+        },
         _ => {
             for q in &p.params {
                 q.used.set(true);
             }
-            ctx.warn(tspan, format!("material '{ty}' not supported; using diffuse reflectance 0.5"))?;
-            Material::Diffuse { reflectance: Spectrum::constant("fallback", 0.5) }
+            ctx.warn(
+                tspan,
+                format!("material '{ty}' not supported; using diffuse reflectance 0.5"),
+            )?;
+            Material::Diffuse {
+                reflectance: Spectrum::constant("fallback", 0.5),
+            }
         }
     })
 }
@@ -370,29 +541,57 @@ fn photometric(s: &Spectrum) -> f64 {
 fn luminance_y_of_one() -> f64 {
     static Y: std::sync::OnceLock<f64> = std::sync::OnceLock::new();
     *Y.get_or_init(|| {
-        let grid = crate::spectrum::WavelengthGrid { start_nm: 360.0, step_nm: 1.0, count: 471 };
-        Spectrum::constant("one", 1.0).integrate_product(&crate::spectrum::library::cie1931_cmfs()[1], &grid)
+        let grid = crate::spectrum::WavelengthGrid {
+            start_nm: 360.0,
+            step_nm: 1.0,
+            count: 471,
+        };
+        Spectrum::constant("one", 1.0)
+            .integrate_product(&crate::spectrum::library::cie1931_cmfs()[1], &grid)
     })
 }
 
 /// An emission spectrum normalised as pbrt-v4 does (see module docs), times `scale`.
-fn emission(p: &ParamList, name: &str, scale: f64, ctx: &mut Ctx, tspan: Span) -> PResult<Spectrum> {
-    let is_rgb = p.params.iter().any(|q| q.name == name && q.ty == ParamType::Rgb);
+fn emission(
+    p: &ParamList,
+    name: &str,
+    scale: f64,
+    ctx: &mut Ctx,
+    tspan: Span,
+) -> PResult<Spectrum> {
+    let is_rgb = p
+        .params
+        .iter()
+        .any(|q| q.name == name && q.ty == ParamType::Rgb);
     let s = match p.spectrum(name, SpectrumKind::Illuminant, ctx)? {
         Some(s) => s,
-        None => super::params::rgb_to_spectrum([1.0, 1.0, 1.0], SpectrumKind::Illuminant, name).expect("finite white"),
+        None => super::params::rgb_to_spectrum([1.0, 1.0, 1.0], SpectrumKind::Illuminant, name)
+            .expect("finite white"),
     };
-    let norm = if is_rgb || !p.has(name) { luminance_y_of_one() } else { photometric(&s) };
+    let norm = if is_rgb || !p.has(name) {
+        luminance_y_of_one()
+    } else {
+        photometric(&s)
+    };
     if !(norm > 0.0) {
         if s.values.iter().all(|&v| v == 0.0) {
             return Ok(s);
         }
-        return Err(SpanError::new(p.span_of(name).unwrap_or(tspan), format!("emission '{name}' has no luminance (zero in the visible range)")));
+        return Err(SpanError::new(
+            p.span_of(name).unwrap_or(tspan),
+            format!("emission '{name}' has no luminance (zero in the visible range)"),
+        ));
     }
     Ok(s.scaled(scale / norm).with_unit("W/(sr·m²·nm)"))
 }
 
-pub fn light(ty: &str, tspan: Span, p: &ParamList, ctx: &mut Ctx, xf: &DMat4) -> PResult<Option<Light>> {
+pub fn light(
+    ty: &str,
+    tspan: Span,
+    p: &ParamList,
+    ctx: &mut Ctx,
+    xf: &DMat4,
+) -> PResult<Option<Light>> {
     let scale = p.float("scale", 1.0)?;
     Ok(Some(match ty {
         "point" | "goniometric" | "projection" => {
@@ -402,14 +601,20 @@ pub fn light(ty: &str, tspan: Span, p: &ParamList, ctx: &mut Ctx, xf: &DMat4) ->
                         q.used.set(true);
                     }
                 }
-                ctx.warn(tspan, format!("light '{ty}' not supported; an isotropic point light is used"))?;
+                ctx.warn(
+                    tspan,
+                    format!("light '{ty}' not supported; an isotropic point light is used"),
+                )?;
             }
             let mut i = emission(p, "I", scale, ctx, tspan)?;
             if let Some(phi) = p.float_opt("power")?.filter(|&v| v > 0.0) {
                 i = i.scaled(phi / (4.0 * PI));
             }
             let from = p.point3("from", [0.0; 3])?;
-            Light::Point { position: xf.transform_point3(DVec3::from(from)), intensity: i }
+            Light::Point {
+                position: xf.transform_point3(DVec3::from(from)),
+                intensity: i,
+            }
         }
         "spot" => {
             let mut i = emission(p, "I", scale, ctx, tspan)?;
@@ -446,11 +651,17 @@ pub fn light(ty: &str, tspan: Span, p: &ParamList, ctx: &mut Ctx, xf: &DMat4) ->
             if !(dir.length() > 0.0) {
                 return Err(SpanError::new(tspan, "distant light 'from' equals 'to'"));
             }
-            Light::Distant { direction: dir.normalize(), irradiance: l }
+            Light::Distant {
+                direction: dir.normalize(),
+                irradiance: l,
+            }
         }
         "infinite" => {
             if let Some(f) = p.string("filename")? {
-                ctx.warn(p.span_of("filename").unwrap_or(tspan), format!("environment map '{f}' not supported; a uniform environment is used"))?;
+                ctx.warn(
+                    p.span_of("filename").unwrap_or(tspan),
+                    format!("environment map '{f}' not supported; a uniform environment is used"),
+                )?;
             }
             mark_used(p, &["portal"]);
             let mut l = emission(p, "L", scale, ctx, tspan)?;
@@ -469,22 +680,38 @@ pub fn light(ty: &str, tspan: Span, p: &ParamList, ctx: &mut Ctx, xf: &DMat4) ->
     }))
 }
 
-pub fn area_light(ty: &str, tspan: Span, p: &ParamList, ctx: &mut Ctx) -> PResult<Option<AreaLightSpec>> {
+pub fn area_light(
+    ty: &str,
+    tspan: Span,
+    p: &ParamList,
+    ctx: &mut Ctx,
+) -> PResult<Option<AreaLightSpec>> {
     if ty != "diffuse" && ty != "area" {
         for q in &p.params {
             q.used.set(true);
         }
-        ctx.warn(tspan, format!("area light '{ty}' not supported; shapes will not emit"))?;
+        ctx.warn(
+            tspan,
+            format!("area light '{ty}' not supported; shapes will not emit"),
+        )?;
         return Ok(None);
     }
     if let Some(f) = p.string("filename")? {
-        ctx.warn(tspan, format!("image area light '{f}' not supported; uniform L is used"))?;
+        ctx.warn(
+            tspan,
+            format!("image area light '{f}' not supported; uniform L is used"),
+        )?;
     }
     let scale = p.float("scale", 1.0)?;
     let radiance = emission(p, "L", scale, ctx, tspan)?;
     let two_sided = p.bool("twosided", false)?;
     let power = p.float_opt("power")?.filter(|&v| v > 0.0);
-    Ok(Some(AreaLightSpec { radiance, two_sided, power, span: tspan }))
+    Ok(Some(AreaLightSpec {
+        radiance,
+        two_sided,
+        power,
+        span: tspan,
+    }))
 }
 
 pub enum Geometry {
@@ -515,40 +742,73 @@ pub struct RawMesh {
 }
 
 fn vec3s(v: &[f64]) -> Vec<DVec3> {
-    v.chunks_exact(3).map(|c| DVec3::new(c[0], c[1], c[2])).collect()
+    v.chunks_exact(3)
+        .map(|c| DVec3::new(c[0], c[1], c[2]))
+        .collect()
 }
 
 fn indices(p: &ParamList, span: Span, per: usize, nverts: usize, what: &str) -> PResult<Vec<u32>> {
     let idx: Vec<u32> = match p.ints("indices")? {
         Some(v) => {
             if v.len() % per != 0 {
-                return Err(SpanError::new(p.span_of("indices").unwrap_or(span), format!("{what} 'indices' count {} is not a multiple of {per}", v.len())));
+                return Err(SpanError::new(
+                    p.span_of("indices").unwrap_or(span),
+                    format!(
+                        "{what} 'indices' count {} is not a multiple of {per}",
+                        v.len()
+                    ),
+                ));
             }
             let mut out = Vec::with_capacity(v.len());
             for &x in v {
                 if x < 0.0 || x as usize >= nverts {
-                    return Err(SpanError::new(p.span_of("indices").unwrap_or(span), format!("{what} index {x} out of range (0..{nverts})")));
+                    return Err(SpanError::new(
+                        p.span_of("indices").unwrap_or(span),
+                        format!("{what} index {x} out of range (0..{nverts})"),
+                    ));
                 }
                 out.push(x as u32);
             }
             out
         }
         None if nverts == per => (0..per as u32).collect(),
-        None => return Err(SpanError::new(span, format!("{what} needs \"integer indices\" (it has {nverts} vertices)"))),
+        None => {
+            return Err(SpanError::new(
+                span,
+                format!("{what} needs \"integer indices\" (it has {nverts} vertices)"),
+            ));
+        }
     };
     Ok(idx)
 }
 
-fn mesh_attrs(p: &ParamList, span: Span, nverts: usize) -> PResult<(Option<Vec<DVec3>>, Option<Vec<Vec2>>)> {
+/// Optional per-vertex normals and uvs.
+type MeshAttrs = (Option<Vec<DVec3>>, Option<Vec<Vec2>>);
+
+fn mesh_attrs(p: &ParamList, span: Span, nverts: usize) -> PResult<MeshAttrs> {
     let n = match p.vec3s("N", &[ParamType::Normal])? {
         Some(v) if v.len() == 3 * nverts => Some(vec3s(v)),
-        Some(v) => return Err(SpanError::new(p.span_of("N").unwrap_or(span), format!("'N' has {} normals for {nverts} vertices", v.len() / 3))),
+        Some(v) => {
+            return Err(SpanError::new(
+                p.span_of("N").unwrap_or(span),
+                format!("'N' has {} normals for {nverts} vertices", v.len() / 3),
+            ));
+        }
         None => None,
     };
     let uvname = if p.has("uv") { "uv" } else { "st" };
     let uv = match p.vec3s(uvname, &[ParamType::Point2, ParamType::Float])? {
-        Some(v) if v.len() == 2 * nverts => Some(v.chunks_exact(2).map(|c| Vec2::new(c[0] as f32, c[1] as f32)).collect()),
-        Some(v) => return Err(SpanError::new(p.span_of(uvname).unwrap_or(span), format!("'{uvname}' has {} values for {nverts} vertices", v.len()))),
+        Some(v) if v.len() == 2 * nverts => Some(
+            v.chunks_exact(2)
+                .map(|c| Vec2::new(c[0] as f32, c[1] as f32))
+                .collect(),
+        ),
+        Some(v) => {
+            return Err(SpanError::new(
+                p.span_of(uvname).unwrap_or(span),
+                format!("'{uvname}' has {} values for {nverts} vertices", v.len()),
+            ));
+        }
         None => None,
     };
     mark_used(p, &["S", "faceIndices", "emissionfilename"]);
@@ -567,20 +827,31 @@ pub fn shape(s: &ShapeInput, ctx: &mut Ctx) -> PResult<Option<Geometry>> {
     if let Some(a) = p.float_opt("alpha")?
         && a < 1.0
     {
-        ctx.warn(p.span_of("alpha").unwrap_or(s.span), "shape 'alpha' cut-outs not supported; the shape is opaque")?;
+        ctx.warn(
+            p.span_of("alpha").unwrap_or(s.span),
+            "shape 'alpha' cut-outs not supported; the shape is opaque",
+        )?;
     }
     let raw = match s.kind {
         "trianglemesh" => {
             let pos = positions(p, s.span, "trianglemesh")?;
             let idx = indices(p, s.span, 3, pos.len(), "trianglemesh")?;
             let (n, uv) = mesh_attrs(p, s.span, pos.len())?;
-            RawMesh { p: pos, n, uv, tri: idx.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect() }
+            RawMesh {
+                p: pos,
+                n,
+                uv,
+                tri: idx.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+            }
         }
         "bilinearmesh" => {
             let pos = positions(p, s.span, "bilinearmesh")?;
             let idx = indices(p, s.span, 4, pos.len(), "bilinearmesh")?;
             let (n, uv) = mesh_attrs(p, s.span, pos.len())?;
-            let tri = idx.chunks_exact(4).flat_map(|c| [[c[0], c[1], c[3]], [c[0], c[3], c[2]]]).collect();
+            let tri = idx
+                .chunks_exact(4)
+                .flat_map(|c| [[c[0], c[1], c[3]], [c[0], c[3], c[2]]])
+                .collect();
             RawMesh { p: pos, n, uv, tri }
         }
         "loopsubdiv" => {
@@ -588,11 +859,23 @@ pub fn shape(s: &ShapeInput, ctx: &mut Ctx) -> PResult<Option<Geometry>> {
             let idx = indices(p, s.span, 3, pos.len(), "loopsubdiv")?;
             let levels = p.int("levels", 3)?;
             if levels > 1 {
-                ctx.warn(p.span_of("levels").unwrap_or(s.span), format!("loopsubdiv: {levels} levels requested; one level is applied"))?;
+                ctx.warn(
+                    p.span_of("levels").unwrap_or(s.span),
+                    format!("loopsubdiv: {levels} levels requested; one level is applied"),
+                )?;
             }
             let tri: Vec<[u32; 3]> = idx.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
-            let (p2, t2) = if levels >= 1 { super::subdiv::loop_once(&pos, &tri) } else { (pos, tri) };
-            RawMesh { p: p2, n: None, uv: None, tri: t2 }
+            let (p2, t2) = if levels >= 1 {
+                super::subdiv::loop_once(&pos, &tri)
+            } else {
+                (pos, tri)
+            };
+            RawMesh {
+                p: p2,
+                n: None,
+                uv: None,
+                tri: t2,
+            }
         }
         "plymesh" => {
             let Some(f) = p.string("filename")? else {
@@ -600,29 +883,44 @@ pub fn shape(s: &ShapeInput, ctx: &mut Ctx) -> PResult<Option<Geometry>> {
             };
             mark_used(p, &["displacement", "edgelength"]);
             let path = ctx.resolve_path(&f);
-            super::ply::read(&path).map_err(|m| SpanError::new(p.span_of("filename").unwrap_or(s.span), m))?
+            super::ply::read(&path)
+                .map_err(|m| SpanError::new(p.span_of("filename").unwrap_or(s.span), m))?
         }
         "sphere" => {
             let r = p.float("radius", 1.0)?;
             if !(r > 0.0) {
-                return Err(SpanError::new(s.span, format!("sphere radius must be > 0, got {r}")));
+                return Err(SpanError::new(
+                    s.span,
+                    format!("sphere radius must be > 0, got {r}"),
+                ));
             }
             for n in ["zmin", "zmax", "phimax"] {
                 if p.has(n) {
                     p.find(n);
-                    ctx.warn(p.span_of(n).unwrap_or(s.span), format!("partial spheres ('{n}') not supported; a full sphere is used"))?;
+                    ctx.warn(
+                        p.span_of(n).unwrap_or(s.span),
+                        format!("partial spheres ('{n}') not supported; a full sphere is used"),
+                    )?;
                 }
             }
             if !s.force_mesh {
                 let (scale, uniform) = uniform_scale(&s.to_world);
                 if !uniform {
-                    ctx.warn(s.span, "sphere under a non-uniform scale; the mean scale is used")?;
+                    ctx.warn(
+                        s.span,
+                        "sphere under a non-uniform scale; the mean scale is used",
+                    )?;
                 }
                 if s.reverse_orientation {
-                    ctx.warn(s.span, "ReverseOrientation on a sphere ignored (spheres face outwards)")?;
+                    ctx.warn(
+                        s.span,
+                        "ReverseOrientation on a sphere ignored (spheres face outwards)",
+                    )?;
                 }
                 let radius = r * scale;
-                let emission = s.area_light.map(|a| emission_for(a, 4.0 * PI * radius * radius));
+                let emission = s
+                    .area_light
+                    .map(|a| emission_for(a, 4.0 * PI * radius * radius));
                 return Ok(Some(Geometry::Sphere(Sphere {
                     center: s.to_world.transform_point3(DVec3::ZERO),
                     radius,
@@ -637,18 +935,27 @@ pub fn shape(s: &ShapeInput, ctx: &mut Ctx) -> PResult<Option<Geometry>> {
             let r = p.float("radius", 1.0)?;
             let h = p.float("height", 0.0)?;
             if !(r > 0.0) {
-                return Err(SpanError::new(s.span, format!("disk radius must be > 0, got {r}")));
+                return Err(SpanError::new(
+                    s.span,
+                    format!("disk radius must be > 0, got {r}"),
+                ));
             }
             for n in ["innerradius", "phimax"] {
                 if p.has(n) {
                     p.find(n);
-                    ctx.warn(p.span_of(n).unwrap_or(s.span), format!("partial disks ('{n}') not supported; a full disk is used"))?;
+                    ctx.warn(
+                        p.span_of(n).unwrap_or(s.span),
+                        format!("partial disks ('{n}') not supported; a full disk is used"),
+                    )?;
                 }
             }
             if !s.force_mesh {
                 let (scale, uniform) = uniform_scale(&s.to_world);
                 if !uniform {
-                    ctx.warn(s.span, "disk under a non-uniform scale; the mean scale is used")?;
+                    ctx.warn(
+                        s.span,
+                        "disk under a non-uniform scale; the mean scale is used",
+                    )?;
                 }
                 let nm = normal_matrix(&s.to_world);
                 let mut n = (nm * DVec3::Z).normalize();
@@ -692,7 +999,10 @@ fn emission_for(a: &AreaLightSpec, area_m2: f64) -> Emission {
         let k_e = if a.two_sided { 2.0 } else { 1.0 } * area_m2 * PI;
         radiance = radiance.scaled(phi / k_e);
     }
-    Emission { radiance, two_sided: a.two_sided }
+    Emission {
+        radiance,
+        two_sided: a.two_sided,
+    }
 }
 
 fn normal_matrix(m: &DMat4) -> DMat3 {
@@ -704,7 +1014,8 @@ fn uniform_scale(m: &DMat4) -> (f64, bool) {
     let a = DMat3::from_mat4(*m);
     let l = [a.x_axis.length(), a.y_axis.length(), a.z_axis.length()];
     let mean = (l[0] + l[1] + l[2]) / 3.0;
-    let orth = a.x_axis.dot(a.y_axis).abs() + a.y_axis.dot(a.z_axis).abs() + a.x_axis.dot(a.z_axis).abs();
+    let orth =
+        a.x_axis.dot(a.y_axis).abs() + a.y_axis.dot(a.z_axis).abs() + a.x_axis.dot(a.z_axis).abs();
     let uniform = l.iter().all(|v| (v - mean).abs() <= 1e-6 * mean) && orth <= 1e-6 * mean * mean;
     (mean, uniform)
 }
@@ -716,7 +1027,11 @@ fn tessellate_sphere(r: f64) -> RawMesh {
         let th = PI * j as f64 / nv as f64;
         for i in 0..nu {
             let ph = 2.0 * PI * i as f64 / nu as f64;
-            p.push(DVec3::new(r * th.sin() * ph.cos(), r * th.sin() * ph.sin(), r * th.cos()));
+            p.push(DVec3::new(
+                r * th.sin() * ph.cos(),
+                r * th.sin() * ph.sin(),
+                r * th.cos(),
+            ));
         }
     }
     let mut tri = vec![];
@@ -736,7 +1051,12 @@ fn tessellate_sphere(r: f64) -> RawMesh {
         }
     }
     let n = p.iter().map(|q| q.normalize()).collect();
-    RawMesh { p, n: Some(n), uv: None, tri }
+    RawMesh {
+        p,
+        n: Some(n),
+        uv: None,
+        tri,
+    }
 }
 
 fn tessellate_disk(r: f64, h: f64) -> RawMesh {
@@ -747,7 +1067,12 @@ fn tessellate_disk(r: f64, h: f64) -> RawMesh {
         p.push(DVec3::new(r * ph.cos(), r * ph.sin(), h));
     }
     let tri = (0..nu).map(|i| [0, 1 + i, 1 + (i + 1) % nu]).collect();
-    RawMesh { p, n: None, uv: None, tri }
+    RawMesh {
+        p,
+        n: None,
+        uv: None,
+        tri,
+    }
 }
 
 /// Transform to world space and orient the triangles as pbrt does (see module docs).
@@ -756,7 +1081,10 @@ fn to_world_mesh(raw: RawMesh, s: &ShapeInput) -> Mesh {
     let nm = normal_matrix(&m);
     let swaps = DMat3::from_mat4(m).determinant() < 0.0;
     let pw: Vec<DVec3> = raw.p.iter().map(|&q| m.transform_point3(q)).collect();
-    let nw: Option<Vec<DVec3>> = raw.n.as_ref().map(|n| n.iter().map(|&v| (nm * v).normalize_or_zero()).collect());
+    let nw: Option<Vec<DVec3>> = raw
+        .n
+        .as_ref()
+        .map(|n| n.iter().map(|&v| (nm * v).normalize_or_zero()).collect());
     let flip_all = s.reverse_orientation ^ swaps;
     let mut indices = Vec::with_capacity(raw.tri.len());
     for t in &raw.tri {
@@ -769,7 +1097,11 @@ fn to_world_mesh(raw: RawMesh, s: &ShapeInput) -> Mesh {
         let flip = match &nw {
             Some(n) => {
                 let ns = n[a as usize] + n[b as usize] + n[c as usize];
-                if ns.length_squared() > 0.0 { ng.dot(ns) < 0.0 } else { flip_all }
+                if ns.length_squared() > 0.0 {
+                    ng.dot(ns) < 0.0
+                } else {
+                    flip_all
+                }
             }
             None => flip_all,
         };
@@ -784,8 +1116,15 @@ fn to_world_mesh(raw: RawMesh, s: &ShapeInput) -> Mesh {
         .sum();
     let emission = s.area_light.map(|a| emission_for(a, area));
     Mesh {
-        positions: pw.iter().map(|q| Vec3::new(q.x as f32, q.y as f32, q.z as f32)).collect(),
-        normals: nw.map(|n| n.iter().map(|q| Vec3::new(q.x as f32, q.y as f32, q.z as f32)).collect()),
+        positions: pw
+            .iter()
+            .map(|q| Vec3::new(q.x as f32, q.y as f32, q.z as f32))
+            .collect(),
+        normals: nw.map(|n| {
+            n.iter()
+                .map(|q| Vec3::new(q.x as f32, q.y as f32, q.z as f32))
+                .collect()
+        }),
         uvs: raw.uv,
         indices,
         material: s.material,
