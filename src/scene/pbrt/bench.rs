@@ -11,8 +11,15 @@ use std::time::Instant;
 pub struct ParseBenchReport {
     pub file_bytes: u64,
     pub triangles: usize,
+    /// Wall-clock parse time.
     pub parse_s: f64,
+    /// CPU time of the process during the parse (user + system), when available:
+    /// on a shared machine this is the fairer denominator.
+    pub parse_cpu_s: Option<f64>,
+    /// MB (10^6 bytes) per wall-clock second.
     pub throughput_mb_per_s: f64,
+    /// MB per CPU second, when available.
+    pub throughput_mb_per_cpu_s: Option<f64>,
     /// Peak resident set size of the process (VmHWM), in MiB, if available.
     pub peak_rss_mib: Option<f64>,
     pub threads: usize,
@@ -24,6 +31,18 @@ pub fn peak_rss_mib() -> Option<f64> {
     let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
     let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kb / 1024.0)
+}
+
+/// CPU time (user + system) of this process in seconds, from /proc/self/stat
+/// (clock ticks assumed 100 Hz, the Linux default).
+pub fn process_cpu_s() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // fields after the parenthesised command name; utime and stime are fields 14 and 15
+    let rest = &s[s.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ut: f64 = f.get(11)?.parse().ok()?;
+    let st: f64 = f.get(12)?.parse().ok()?;
+    Some((ut + st) / 100.0)
 }
 
 /// Write a pbrt file holding one grid `trianglemesh` of about `target_mb` megabytes.
@@ -78,14 +97,21 @@ pub fn run_parse_benchmark(target_mb: f64) -> Result<ParseBenchReport> {
     let dir = tempfile::tempdir().map_err(|e| Error::invalid(format!("temp dir: {e}")))?;
     let path = dir.path().join("bench-mesh.pbrt");
     let bytes = write_mesh_file(&path, target_mb)?;
+    let c0 = process_cpu_s();
     let t = Instant::now();
     let scene = super::load(&path, &super::LoadOptions::default())?;
     let dt = t.elapsed().as_secs_f64();
+    let cpu = match (c0, process_cpu_s()) {
+        (Some(a), Some(b)) if b > a => Some(b - a),
+        _ => None,
+    };
     Ok(ParseBenchReport {
         file_bytes: bytes,
         triangles: scene.triangle_count(),
         parse_s: dt,
+        parse_cpu_s: cpu,
         throughput_mb_per_s: bytes as f64 / 1e6 / dt,
+        throughput_mb_per_cpu_s: cpu.map(|c| bytes as f64 / 1e6 / c),
         peak_rss_mib: peak_rss_mib(),
         threads: 1,
     })

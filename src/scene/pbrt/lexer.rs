@@ -209,9 +209,11 @@ impl Lexer {
                     self.pos = e;
                     let first = src[start];
                     let num = if first.is_ascii_digit() || matches!(first, b'+' | b'-' | b'.') {
-                        std::str::from_utf8(&src[start..e])
-                            .ok()
-                            .and_then(parse_number)
+                        fast_decimal(&src[start..e]).or_else(|| {
+                            std::str::from_utf8(&src[start..e])
+                                .ok()
+                                .and_then(parse_number)
+                        })
                     } else {
                         None
                     };
@@ -230,6 +232,9 @@ impl Lexer {
 /// anything else, including `inf`/`nan`.
 pub fn parse_number(s: &str) -> Option<f64> {
     let b = s.as_bytes();
+    if let Some(v) = fast_decimal(b) {
+        return Some(v);
+    }
     // Rust's parser accepts "inf"/"nan"/"infinity"; pbrt does not.
     if !b
         .iter()
@@ -239,6 +244,46 @@ pub fn parse_number(s: &str) -> Option<f64> {
     }
     let v: f64 = s.parse().ok()?;
     v.is_finite().then_some(v)
+}
+
+/// Exact fast path for plain decimals (`-12`, `0.125`, `3.`) with at most 15
+/// significant digits and no exponent: the digits form an integer m < 10^15 < 2^53
+/// and 10^k (k ≤ 22) is exact, so m / 10^k is one correctly rounded division — the
+/// same value the general parser returns (Clinger's fast path). None otherwise.
+fn fast_decimal(b: &[u8]) -> Option<f64> {
+    const POW10: [f64; 23] = [
+        1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
+        1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
+    ];
+    let (neg, digits) = match b.first()? {
+        b'-' => (true, &b[1..]),
+        b'+' => (false, &b[1..]),
+        _ => (false, b),
+    };
+    let mut m: u64 = 0;
+    let mut n_digits = 0usize;
+    let mut frac: Option<usize> = None;
+    for &c in digits {
+        match c {
+            b'0'..=b'9' => {
+                m = m * 10 + (c - b'0') as u64;
+                n_digits += 1;
+                if let Some(f) = frac.as_mut() {
+                    *f += 1;
+                }
+                if n_digits > 15 {
+                    return None;
+                }
+            }
+            b'.' if frac.is_none() => frac = Some(0),
+            _ => return None,
+        }
+    }
+    if n_digits == 0 {
+        return None;
+    }
+    let v = m as f64 / POW10[frac.unwrap_or(0)];
+    Some(if neg { -v } else { v })
 }
 
 /// Resolve the escapes of a quoted string's contents.
@@ -318,5 +363,32 @@ mod tests {
         assert_eq!(parse_number("inf"), None);
         assert_eq!(parse_number("1e400"), None);
         assert_eq!(parse_number("1."), Some(1.0));
+        assert_eq!(parse_number("."), None);
+        assert_eq!(parse_number("-"), None);
+        assert_eq!(parse_number("1.2.3"), None);
+    }
+
+    #[test]
+    fn fast_path_agrees_with_the_general_parser() {
+        // Deterministic sample of decimals of up to 15 digits, both signs, all positions of '.'.
+        let mut x: u64 = 0x2545_F491_4F6C_DD1D;
+        for _ in 0..200_000 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            let digits = (x % 1_000_000_000_000_000) as u128;
+            let mut s = digits.to_string();
+            let dot = (x >> 50) as usize % (s.len() + 1);
+            s.insert(dot, '.');
+            if x & 1 == 1 {
+                s.insert(0, '-');
+            }
+            let want: f64 = s.parse().unwrap();
+            assert_eq!(
+                parse_number(&s).map(f64::to_bits),
+                Some(want.to_bits()),
+                "{s}"
+            );
+        }
     }
 }

@@ -187,6 +187,8 @@ pub struct Param {
     pub ty: ParamType,
     pub name: String,
     pub nums: Vec<f64>,
+    /// Values of an `integer` parameter (32-bit, as pbrt).
+    pub ints: Vec<i32>,
     pub strs: Vec<String>,
     pub bools: Vec<bool>,
     /// Span of the `"type name"` declaration.
@@ -201,6 +203,7 @@ impl Param {
         match self.ty {
             ParamType::Bool => self.bools.len(),
             ParamType::String | ParamType::Texture => self.strs.len(),
+            ParamType::Integer => self.ints.len(),
             _ => self.nums.len(),
         }
     }
@@ -288,10 +291,19 @@ impl ParamList {
         self.one_num(name, ParamType::Float)
     }
     pub fn int(&self, name: &str, default: i64) -> PResult<i64> {
-        Ok(self
-            .one_num(name, ParamType::Integer)?
-            .map(|v| v as i64)
-            .unwrap_or(default))
+        let Some(p) = self.typed(name, &[ParamType::Integer])? else {
+            return Ok(default);
+        };
+        if p.ints.len() != 1 {
+            return Err(SpanError::new(
+                p.span,
+                format!(
+                    "parameter '{name}' needs exactly 1 value, got {}",
+                    p.ints.len()
+                ),
+            ));
+        }
+        Ok(p.ints[0] as i64)
     }
     pub fn bool(&self, name: &str, default: bool) -> PResult<bool> {
         let Some(p) = self.typed(name, &[ParamType::Bool])? else {
@@ -322,11 +334,11 @@ impl ParamList {
             .typed(name, &[ParamType::Float])?
             .map(|p| p.nums.as_slice()))
     }
-    /// Integer array (values were checked to be integral when parsed).
-    pub fn ints(&self, name: &str) -> PResult<Option<&[f64]>> {
+    /// Integer array.
+    pub fn ints(&self, name: &str) -> PResult<Option<&[i32]>> {
         Ok(self
             .typed(name, &[ParamType::Integer])?
-            .map(|p| p.nums.as_slice()))
+            .map(|p| p.ints.as_slice()))
     }
     /// point3 / vector3 / normal array (flat, multiple of 3).
     pub fn vec3s(&self, name: &str, tys: &[ParamType]) -> PResult<Option<&[f64]>> {

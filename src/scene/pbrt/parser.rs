@@ -55,6 +55,7 @@ struct ParamDefault {
     ty: ParamType,
     name: String,
     nums: Vec<f64>,
+    ints: Vec<i32>,
     strs: Vec<String>,
     bools: Vec<bool>,
     span: Span,
@@ -365,6 +366,7 @@ impl Parser {
                 ty,
                 name: name.to_string(),
                 nums: vec![],
+                ints: vec![],
                 strs: vec![],
                 bools: vec![],
                 span: t.span,
@@ -472,12 +474,13 @@ impl Parser {
                 _ => return Err(bad(self, "numbers or a spectrum name")),
             },
             ty => match (t.kind, t.num) {
-                (TokenKind::Word, Some(x)) => {
-                    if ty == ParamType::Integer && (x.fract() != 0.0 || x.abs() > 9.0e15) {
-                        return Err(bad(self, "integers"));
+                (TokenKind::Word, Some(x)) if ty == ParamType::Integer => {
+                    if x.fract() != 0.0 || x.abs() > i32::MAX as f64 {
+                        return Err(bad(self, "32-bit integers"));
                     }
-                    p.nums.push(x)
+                    p.ints.push(x as i32)
                 }
+                (TokenKind::Word, Some(x)) => p.nums.push(x),
                 _ => return Err(bad(self, "numbers")),
             },
         }
@@ -718,6 +721,7 @@ impl Parser {
                         ty: p.ty,
                         name: p.name,
                         nums: p.nums,
+                        ints: p.ints,
                         strs: p.strs,
                         bools: p.bools,
                         span: p.span,
@@ -981,6 +985,7 @@ impl Parser {
                 ty: d.ty,
                 name: d.name.clone(),
                 nums: d.nums.clone(),
+                ints: d.ints.clone(),
                 strs: d.strs.clone(),
                 bools: d.bools.clone(),
                 span: d.span,

@@ -747,39 +747,46 @@ fn vec3s(v: &[f64]) -> Vec<DVec3> {
         .collect()
 }
 
-fn indices(p: &ParamList, span: Span, per: usize, nverts: usize, what: &str) -> PResult<Vec<u32>> {
-    let idx: Vec<u32> = match p.ints("indices")? {
+fn indices<const N: usize>(
+    p: &ParamList,
+    span: Span,
+    nverts: usize,
+    what: &str,
+) -> PResult<Vec<[u32; N]>> {
+    match p.ints("indices")? {
         Some(v) => {
-            if v.len() % per != 0 {
+            let at = p.span_of("indices").unwrap_or(span);
+            if !v.len().is_multiple_of(N) {
                 return Err(SpanError::new(
-                    p.span_of("indices").unwrap_or(span),
+                    at,
                     format!(
-                        "{what} 'indices' count {} is not a multiple of {per}",
+                        "{what} 'indices' count {} is not a multiple of {N}",
                         v.len()
                     ),
                 ));
             }
-            let mut out = Vec::with_capacity(v.len());
-            for &x in v {
-                if x < 0.0 || x as usize >= nverts {
-                    return Err(SpanError::new(
-                        p.span_of("indices").unwrap_or(span),
-                        format!("{what} index {x} out of range (0..{nverts})"),
-                    ));
+            let mut out = Vec::with_capacity(v.len() / N);
+            for c in v.chunks_exact(N) {
+                let mut e = [0u32; N];
+                for (k, &x) in c.iter().enumerate() {
+                    if x < 0 || x as usize >= nverts {
+                        return Err(SpanError::new(
+                            at,
+                            format!("{what} index {x} out of range (0..{nverts})"),
+                        ));
+                    }
+                    e[k] = x as u32;
                 }
-                out.push(x as u32);
+                out.push(e);
             }
-            out
+            Ok(out)
         }
-        None if nverts == per => (0..per as u32).collect(),
-        None => {
-            return Err(SpanError::new(
-                span,
-                format!("{what} needs \"integer indices\" (it has {nverts} vertices)"),
-            ));
-        }
-    };
-    Ok(idx)
+        None if nverts == N => Ok(vec![std::array::from_fn(|k| k as u32)]),
+        None => Err(SpanError::new(
+            span,
+            format!("{what} needs \"integer indices\" (it has {nverts} vertices)"),
+        )),
+    }
 }
 
 /// Optional per-vertex normals and uvs.
@@ -835,28 +842,23 @@ pub fn shape(s: &ShapeInput, ctx: &mut Ctx) -> PResult<Option<Geometry>> {
     let raw = match s.kind {
         "trianglemesh" => {
             let pos = positions(p, s.span, "trianglemesh")?;
-            let idx = indices(p, s.span, 3, pos.len(), "trianglemesh")?;
+            let tri = indices::<3>(p, s.span, pos.len(), "trianglemesh")?;
             let (n, uv) = mesh_attrs(p, s.span, pos.len())?;
-            RawMesh {
-                p: pos,
-                n,
-                uv,
-                tri: idx.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
-            }
+            RawMesh { p: pos, n, uv, tri }
         }
         "bilinearmesh" => {
             let pos = positions(p, s.span, "bilinearmesh")?;
-            let idx = indices(p, s.span, 4, pos.len(), "bilinearmesh")?;
+            let idx = indices::<4>(p, s.span, pos.len(), "bilinearmesh")?;
             let (n, uv) = mesh_attrs(p, s.span, pos.len())?;
             let tri = idx
-                .chunks_exact(4)
+                .iter()
                 .flat_map(|c| [[c[0], c[1], c[3]], [c[0], c[3], c[2]]])
                 .collect();
             RawMesh { p: pos, n, uv, tri }
         }
         "loopsubdiv" => {
             let pos = positions(p, s.span, "loopsubdiv")?;
-            let idx = indices(p, s.span, 3, pos.len(), "loopsubdiv")?;
+            let tri = indices::<3>(p, s.span, pos.len(), "loopsubdiv")?;
             let levels = p.int("levels", 3)?;
             if levels > 1 {
                 ctx.warn(
@@ -864,7 +866,6 @@ pub fn shape(s: &ShapeInput, ctx: &mut Ctx) -> PResult<Option<Geometry>> {
                     format!("loopsubdiv: {levels} levels requested; one level is applied"),
                 )?;
             }
-            let tri: Vec<[u32; 3]> = idx.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
             let (p2, t2) = if levels >= 1 {
                 super::subdiv::loop_once(&pos, &tri)
             } else {
@@ -1080,19 +1081,25 @@ fn to_world_mesh(raw: RawMesh, s: &ShapeInput) -> Mesh {
     let m = s.to_world;
     let nm = normal_matrix(&m);
     let swaps = DMat3::from_mat4(m).determinant() < 0.0;
-    let pw: Vec<DVec3> = raw.p.iter().map(|&q| m.transform_point3(q)).collect();
-    let nw: Option<Vec<DVec3>> = raw
-        .n
-        .as_ref()
-        .map(|n| n.iter().map(|&v| (nm * v).normalize_or_zero()).collect());
+    let RawMesh {
+        p,
+        n,
+        uv,
+        tri: mut indices,
+    } = raw;
+    let pw: Vec<DVec3> = p.iter().map(|&q| m.transform_point3(q)).collect();
+    drop(p);
+    let nw: Option<Vec<DVec3>> =
+        n.map(|n| n.iter().map(|&v| (nm * v).normalize_or_zero()).collect());
     let flip_all = s.reverse_orientation ^ swaps;
-    let mut indices = Vec::with_capacity(raw.tri.len());
-    for t in &raw.tri {
+    let mut area = 0.0;
+    // In place: drop degenerate triangles (no area, never hit) and orient the rest.
+    indices.retain_mut(|t| {
         let [a, b, c] = *t;
         let (pa, pb, pc) = (pw[a as usize], pw[b as usize], pw[c as usize]);
         let ng = (pb - pa).cross(pc - pa);
         if !(ng.length_squared() > 0.0) || !ng.is_finite() {
-            continue; // degenerate triangle: no area, never hit
+            return false;
         }
         let flip = match &nw {
             Some(n) => {
@@ -1105,27 +1112,18 @@ fn to_world_mesh(raw: RawMesh, s: &ShapeInput) -> Mesh {
             }
             None => flip_all,
         };
-        indices.push(if flip { [a, c, b] } else { [a, b, c] });
-    }
-    let area: f64 = indices
-        .iter()
-        .map(|t| {
-            let (pa, pb, pc) = (pw[t[0] as usize], pw[t[1] as usize], pw[t[2] as usize]);
-            0.5 * (pb - pa).cross(pc - pa).length()
-        })
-        .sum();
+        if flip {
+            t.swap(1, 2);
+        }
+        area += 0.5 * ng.length();
+        true
+    });
     let emission = s.area_light.map(|a| emission_for(a, area));
+    let f32v = |q: &DVec3| Vec3::new(q.x as f32, q.y as f32, q.z as f32);
     Mesh {
-        positions: pw
-            .iter()
-            .map(|q| Vec3::new(q.x as f32, q.y as f32, q.z as f32))
-            .collect(),
-        normals: nw.map(|n| {
-            n.iter()
-                .map(|q| Vec3::new(q.x as f32, q.y as f32, q.z as f32))
-                .collect()
-        }),
-        uvs: raw.uv,
+        positions: pw.iter().map(f32v).collect(),
+        normals: nw.map(|n| n.iter().map(f32v).collect()),
+        uvs: uv,
         indices,
         material: s.material,
         object: s.object,
