@@ -425,8 +425,10 @@ fn c20_gzip_include() {
 fn c21_object_instances() {
     let l = load("21_instances.pbrt");
     let s = &l.scene;
-    assert_eq!(s.instances.len(), 2);
+    assert_eq!(s.instances.len(), 3);
     assert_eq!(l.prototypes.len(), 2);
+    assert_eq!(s.instances[0].object, None);
+    assert_eq!(s.instances[2].object.map(|o| obj(s, o)), Some("Named"));
     assert!(s.spheres.is_empty());
     close(vtx(&s.meshes[0], 0), DVec3::new(0.0, 1.0, 0.0));
     close(
@@ -446,7 +448,7 @@ fn c21_object_instances() {
     near(lo.x, -11.0, 1e-6);
     near(hi.x, 11.0, 1e-6);
     let info = info_json(&l);
-    assert_eq!(info["instances"], 2);
+    assert_eq!(info["instances"], 3);
     assert_eq!(info["shapes"], 0);
 }
 
@@ -578,6 +580,11 @@ fn c30_textures() {
     near(r(0), 0.25, 1e-12);
     near(r(1), 0.5, 1e-12);
     assert!(s.warnings.iter().any(|w| w.contains("imagemap")));
+    // a constant float texture as roughness: α = sqrt(0.09) = 0.3
+    match mat(&s, s.spheres[2].material) {
+        Material::Conductor { roughness, .. } => near(*roughness, 0.3, 1e-12),
+        m => panic!("{m:?}"),
+    }
 }
 
 #[test]

@@ -27,7 +27,8 @@
 //! ## Instances
 //! Shapes between `ObjectBegin`/`ObjectEnd` become meshes (spheres and disks are
 //! tessellated) in the coordinates they were defined in; `ObjectInstance` adds an
-//! `Instance` whose `to_world` is the CTM at the instance. Meshes listed in
+//! `Instance` whose `to_world` is the CTM at the instance; its label override is the
+//! `#ObjectName` path around the `ObjectInstance`, if any (else the prototype's label). Meshes listed in
 //! [`LoadedScene::prototypes`] (also named by any instance) are not drawn on their own.
 
 // `!(x > 0.0)` is deliberate throughout: it rejects NaN along with non-positive values.

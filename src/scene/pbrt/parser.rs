@@ -948,10 +948,14 @@ impl Parser {
                         format!("object '{name}' has no shapes; instance skipped"),
                     )?;
                 } else {
+                    let prototype = meshes.clone();
+                    // An instance inside `#ObjectName`-named blocks gets that label.
+                    let object = (!self.state.names.is_empty())
+                        .then(|| self.scene.object(&self.state.names.join("/")));
                     self.scene.instances.push(Instance {
-                        prototype: meshes.clone(),
+                        prototype,
                         to_world: self.state.ctm[0],
-                        object: None,
+                        object,
                     });
                 }
             }

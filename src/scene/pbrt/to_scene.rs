@@ -346,8 +346,30 @@ fn spectrum_or_texture(
     Ok(Spectrum::constant(names[0], default))
 }
 
-fn roughness_alpha(p: &ParamList, default: f64, v3: bool) -> PResult<f64> {
-    let r = p.float("roughness", default)?;
+fn roughness_alpha(
+    p: &ParamList,
+    default: f64,
+    v3: bool,
+    ctx: &mut Ctx,
+    tex: &Textures,
+) -> PResult<f64> {
+    // A float texture for the roughness: its constant value, else the default with a warning.
+    let mut default = default;
+    if let Some((t, span)) = p.texture_name("roughness") {
+        match tex.map.get(&t) {
+            Some((Some(c), _)) => default = c.eval(550.0),
+            Some((None, _)) => ctx.warn(
+                span,
+                format!("roughness texture '{t}' not supported; roughness {default} used"),
+            )?,
+            None => return Err(SpanError::new(span, format!("unknown texture '{t}'"))),
+        }
+    }
+    let r = if p.texture_name("roughness").is_some() {
+        default
+    } else {
+        p.float("roughness", default)?
+    };
     let u = p.float("uroughness", r)?;
     let v = p.float("vroughness", r)?;
     let r = 0.5 * (u + v);
@@ -412,7 +434,7 @@ pub fn material(
         "coateddiffuse" => {
             let refl =
                 spectrum_or_texture(p, &["reflectance"], SpectrumKind::Albedo, 0.5, ctx, tex)?;
-            let alpha = roughness_alpha(p, 0.0, false)?;
+            let alpha = roughness_alpha(p, 0.0, false, ctx, tex)?;
             let eta = p.float("interface.eta", p.float("eta", 1.5)?)?;
             mark_used(p, &["thickness", "albedo", "g", "maxdepth", "nsamples"]);
             let f0 = ((eta - 1.0) / (eta + 1.0)).powi(2);
@@ -433,7 +455,7 @@ pub fn material(
                 tex,
             )?;
             let ks = spectrum_or_texture(p, &["Ks"], SpectrumKind::Albedo, 0.25, ctx, tex)?;
-            let alpha = roughness_alpha(p, 0.1, true)?;
+            let alpha = roughness_alpha(p, 0.1, true, ctx, tex)?;
             mark_used(p, &["index", "eta", "opacity", "bumpmap"]);
             for n in ["Kr", "Kt"] {
                 if p.has(n) {
@@ -457,7 +479,7 @@ pub fn material(
             if v3 {
                 ctx.warn(tspan, "pbrt-v3 material 'metal' read as 'conductor'")?;
             }
-            let alpha = roughness_alpha(p, if v3 { 0.01 } else { 0.0 }, v3)?;
+            let alpha = roughness_alpha(p, if v3 { 0.01 } else { 0.0 }, v3, ctx, tex)?;
             if p.has("reflectance") {
                 let r =
                     spectrum_or_texture(p, &["reflectance"], SpectrumKind::Albedo, 1.0, ctx, tex)?;
@@ -503,7 +525,7 @@ pub fn material(
                 ctx.warn(tspan, "'thindielectric' read as a solid 'dielectric'")?;
             }
             let ior = eta_spectrum(p, &["eta", "index"], 1.5, ctx)?;
-            let alpha = roughness_alpha(p, 0.0, ty == "glass")?;
+            let alpha = roughness_alpha(p, 0.0, ty == "glass", ctx, tex)?;
             if alpha > 0.0 {
                 ctx.warn(tspan, "rough dielectric read as smooth")?;
             }
