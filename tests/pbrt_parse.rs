@@ -427,6 +427,8 @@ fn c21_object_instances() {
     let s = &l.scene;
     assert_eq!(s.instances.len(), 3);
     assert_eq!(l.prototypes.len(), 2);
+    let mask = camsim::scene::pbrt::prototype_mask(s);
+    assert_eq!(mask, vec![true, true]);
     assert_eq!(s.instances[0].object, None);
     assert_eq!(s.instances[2].object.map(|o| obj(s, o)), Some("Named"));
     assert!(s.spheres.is_empty());

@@ -137,6 +137,21 @@ fn warning_text(p: &parser::Parser, w: &SpanError) -> String {
     )
 }
 
+/// Which meshes are instance prototypes: those named by any `Instance::prototype`.
+/// The pbrt loader never lists a prototype as a plain mesh too, so a renderer draws
+/// mesh `i` directly exactly when `!prototype_mask(scene)[i]`.
+pub fn prototype_mask(scene: &Scene) -> Vec<bool> {
+    let mut m = vec![false; scene.meshes.len()];
+    for inst in &scene.instances {
+        for &i in &inst.prototype {
+            if let Some(x) = m.get_mut(i) {
+                *x = true;
+            }
+        }
+    }
+    m
+}
+
 /// Axis-aligned world bounds of everything drawn (plain meshes, instances, spheres,
 /// disks), or None for an empty scene.
 pub fn world_bounds(scene: &Scene, prototypes: &[usize]) -> Option<(DVec3, DVec3)> {
