@@ -134,8 +134,9 @@ pub fn bench(a: BenchArgs) -> Result<i32> {
             println!("{r}");
             Ok(0)
         }
+        "parse" => super::scene::bench_parse(),
         other => Err(Error::NotSupported(format!(
-            "bench '{other}' (available here: render)"
+            "bench '{other}' (available: render, parse, sensor)"
         ))),
     }
 }

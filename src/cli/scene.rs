@@ -1,4 +1,5 @@
-use camsim::{Error, Result};
+use camsim::Result;
+use camsim::scene::pbrt::{LoadOptions, info_json, load_full};
 use clap::{Args, Subcommand};
 use std::path::PathBuf;
 
@@ -16,6 +17,27 @@ pub struct InfoArgs {
     pub strict: bool,
 }
 
-pub fn run(_c: SceneCmd) -> Result<i32> {
-    Err(Error::NotSupported("scene info".into()))
+pub fn run(c: SceneCmd) -> Result<i32> {
+    match c {
+        SceneCmd::Info(a) => {
+            let l = load_full(&a.scene, &LoadOptions { strict: a.strict })?;
+            let text = serde_json::to_string_pretty(&info_json(&l))
+                .map_err(|e| camsim::Error::invalid(e.to_string()))?;
+            use std::io::Write;
+            // A closed pipe (e.g. `| head`) is not an error worth a panic.
+            let _ = writeln!(std::io::stdout(), "{text}");
+            Ok(0)
+        }
+    }
+}
+
+/// `camsim bench parse`: parse a generated ~100 MB `trianglemesh` file on one core and
+/// print MB/s and peak memory as JSON (to be dispatched from `cli::render::bench`).
+pub fn bench_parse() -> Result<i32> {
+    let r = camsim::scene::pbrt::bench::run_parse_benchmark(100.0)?;
+    let text =
+        serde_json::to_string_pretty(&r).map_err(|e| camsim::Error::invalid(e.to_string()))?;
+    use std::io::Write;
+    let _ = writeln!(std::io::stdout(), "{text}");
+    Ok(0)
 }

@@ -3,6 +3,8 @@
 pub mod kdl_scene;
 pub mod mesh_io;
 pub mod model;
+pub mod pbrt;
 pub mod shapes;
+pub mod targets;
 
 pub use model::*;
