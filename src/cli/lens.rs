@@ -46,6 +46,11 @@ pub struct FitRtfArgs {
     pub wavelengths: Vec<f64>,
     #[arg(long)]
     pub out: PathBuf,
+    /// Pass/no-pass representation: `ellipses` (minimum-area enclosing
+    /// ellipse per field radius, as the paper's files) or `area-ellipses`
+    /// (radial extent and area of the pass region; exact flux when vignetted).
+    #[arg(long, default_value = "ellipses")]
+    pub pass_method: String,
 }
 
 pub fn run(c: LensCmd) -> Result<i32> {
@@ -67,7 +72,10 @@ pub fn run(c: LensCmd) -> Result<i32> {
             let cam = analysis::lens_camera(lens, a.film_distance_mm, None, w)?;
             let max_mm = match &cam {
                 analysis::LensCamera::Prescription(c) => c.max_film_radius_mm,
-                analysis::LensCamera::Rtf(c) => c.rtf.waves[0].pass.positions_mm.last().copied().unwrap_or(0.0),
+                analysis::LensCamera::Rtf(c) => match c.rtf.waves[0].pass.max_radius_mm() {
+                    Some(m) => m,
+                    None => c.film_distance_mm,
+                },
             };
             let heights: Vec<f64> = (0..=40).map(|k| max_mm * k as f64 / 40.0).collect();
             let ri = analysis::relative_illumination(cam.camera(), &heights, w, 200)?;
@@ -99,7 +107,12 @@ pub fn run(c: LensCmd) -> Result<i32> {
                 return Err(Error::Invalid(format!("{}: fit-rtf needs a lens prescription, not an RTF", a.prescription.display())));
             };
             let waves = if a.wavelengths.is_empty() { vec![DEFAULT_WAVELENGTH_NM] } else { a.wavelengths.clone() };
-            let opts = camsim::optics::fit::FitOptions { degree: a.degree, ..Default::default() };
+            let pass_method = match a.pass_method.as_str() {
+                "ellipses" | "ellipse" | "minimalellipse" => camsim::optics::fit::PassMethod::Ellipses,
+                "area-ellipses" => camsim::optics::fit::PassMethod::AreaEllipses,
+                other => return Err(Error::Invalid(format!("--pass-method: expected 'ellipses' or 'area-ellipses', got '{other}'"))),
+            };
+            let opts = camsim::optics::fit::FitOptions { degree: a.degree, pass_method, ..Default::default() };
             let (rtf, reports) = camsim::optics::fit::fit_rtf(&p, &waves, &opts)?;
             let text = serde_json::to_string_pretty(&rtf.to_json()).map_err(|e| Error::Invalid(e.to_string()))?;
             camsim::diag::write_atomic(&a.out, text.as_bytes())?;

@@ -297,9 +297,10 @@ pub fn lens_info(lens: &LensFile, wavelength_nm: f64) -> Result<LensInfo> {
         }
         (LensFile::Rtf(r), LensCamera::Rtf(c)) => {
             let w = &r.waves[0];
-            let [_, _, rx, ry] = w.pass.at(0.0).unwrap_or([0.0; 4]);
+            let [x0, x1, y0, y1] = w.pass.bbox(0.0).unwrap_or([0.0; 4]);
+            let (rx, ry) = (0.5 * (x1 - x0), 0.5 * (y1 - y0));
             // Focal length: chief-ray-like average output angle from a film point h.
-            let h = 0.05 * w.pass.positions_mm.last().copied().unwrap_or(1.0);
+            let h = 0.05 * w.pass.max_radius_mm().unwrap_or(d);
             let n = 32;
             let (mut sx, mut k) = (0.0, 0);
             for i in 0..n {
@@ -315,7 +316,7 @@ pub fn lens_info(lens: &LensFile, wavelength_nm: f64) -> Result<LensInfo> {
             Ok(LensInfo {
                 focal_length_mm: f,
                 f_number: working,
-                exit_pupil_from_film_mm: c.input_plane_z_mm() + w.pass.plane_distance_mm,
+                exit_pupil_from_film_mm: c.input_plane_z_mm() + w.pass.plane_distance_mm(),
                 exit_pupil_radius_mm: (rx * ry).sqrt(),
                 film_distance_infinity_mm: d,
                 working_f_number: working,

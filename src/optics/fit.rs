@@ -1,8 +1,9 @@
 //! Fitting a ray-transfer function (RTF) to a lens prescription used as a
 //! black box (paper III-B; Goossens et al. 2022).
 //!
-//! Planes (mm): the input plane lies `planeoffsetinput` = (sag of the rear
-//! surface towards the film, if any) + 1 % of f behind the rear vertex, the
+//! Planes (mm): the input plane lies `planeoffsetinput` = max(0.98 × back
+//! focal distance, rear-surface sag towards the film + 1 % of f) behind the
+//! rear vertex, the
 //! output plane `planeoffsetoutput` = (sag of the front surface towards the
 //! scene, if any) + 1 % of f beyond the front vertex. `outz` is written as the
 //! constant input-to-output-plane distance (see `rtf.rs` for the convention).
@@ -30,8 +31,8 @@
 //! algorithm and scaled to contain every point. Radii beyond the last
 //! radius that passes any light get no ellipse (the RTF camera blocks them).
 
-use super::prescription::{Prescription, PrescriptionCamera};
-use super::rtf::{Ellipses, Poly, Rtf, RtfWave};
+use super::prescription::Prescription;
+use super::rtf::{Ellipses, PassNoPass, Poly, Rtf, RtfWave};
 use crate::{Error, Result};
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
@@ -45,13 +46,26 @@ pub struct FitOptions {
     /// Radial × angular pupil grid per field radius.
     pub n_rho: usize,
     pub n_theta: usize,
-    /// Field radii with an ellipse.
+    /// Field radii with an ellipse (or used to fit the circles).
     pub n_ellipses: usize,
+    pub pass_method: PassMethod,
+}
+
+/// Pass/no-pass representation written by the fit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PassMethod {
+    /// Minimum-area enclosing ellipse per field radius (the paper's files).
+    Ellipses,
+    /// Per field radius, the axis-aligned ellipse with the pass region's
+    /// radial extent and area (preserves the transmitted flux where the
+    /// region is a vignetted "cat's eye", which the enclosing ellipse
+    /// overestimates).
+    AreaEllipses,
 }
 
 impl Default for FitOptions {
     fn default() -> Self {
-        Self { degree: 5, n_field: 24, n_rho: 8, n_theta: 24, n_ellipses: 41 }
+        Self { degree: 5, n_field: 24, n_rho: 8, n_theta: 24, n_ellipses: 41, pass_method: PassMethod::Ellipses }
     }
 }
 
@@ -277,6 +291,26 @@ fn inv3(m: &[[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
     Some(inv)
 }
 
+/// Axis-aligned ellipse with the region's radial (y) extent and its area:
+/// cy, ry from the extreme y of the boundary, rx = area/(π·ry), cx = 0. The
+/// boundary points come in angular order around an interior point as pairs
+/// (p, mirrored p); the even ones form a star-shaped polygon (shoelace area).
+pub fn area_matched_ellipse(pts: &[DVec2]) -> Option<(DVec2, [f64; 2])> {
+    let poly: Vec<DVec2> = pts.iter().step_by(2).copied().collect();
+    let n = poly.len();
+    if n < 3 {
+        return None;
+    }
+    let area = 0.5 * (0..n).map(|i| poly[i].perp_dot(poly[(i + 1) % n])).sum::<f64>().abs();
+    let ymin = pts.iter().map(|p| p.y).fold(f64::INFINITY, f64::min);
+    let ymax = pts.iter().map(|p| p.y).fold(f64::NEG_INFINITY, f64::max);
+    let ry = 0.5 * (ymax - ymin);
+    if !(ry > 0.0 && area > 0.0) {
+        return None;
+    }
+    Some((DVec2::new(0.0, 0.5 * (ymin + ymax)), [area / (std::f64::consts::PI * ry), ry]))
+}
+
 /// Monomial exponents of total degree ≤ N, ordered by degree.
 pub fn monomials(degree: usize) -> Vec<[u32; 3]> {
     let mut t = Vec::new();
@@ -339,7 +373,11 @@ pub fn fit_rtf(lens: &Prescription, wavelengths_nm: &[f64], opts: &FitOptions) -
     // Rear surface bulging towards the film: radius > 0 (centre on the film side).
     let rear_sag = if last.radius_mm > 0.0 { rim_sag(last.radius_mm, last.semi_aperture_mm) } else { 0.0 };
     let front_sag = if first.radius_mm < 0.0 { rim_sag(first.radius_mm, first.semi_aperture_mm) } else { 0.0 };
-    let offset_in = rear_sag + 0.01 * f;
+    // Input plane just in front of the infinity-focus film plane (as in the
+    // Pixel 4a file): each input point then is (nearly) a film point, and the
+    // pass region is that film point's vignetted pupil, which an ellipse fits
+    // far better than the half-plane cuts the rear rim makes close to the lens.
+    let offset_in = (0.98 * px.back_focal_distance_mm).max(rear_sag + 0.01 * f);
     let offset_out = front_sag + 0.01 * f;
     let track = lens.total_track_mm();
     let mut waves = Vec::new();
@@ -352,44 +390,47 @@ pub fn fit_rtf(lens: &Prescription, wavelengths_nm: &[f64], opts: &FitOptions) -
             pass_distance = offset_in;
         }
         let bb = BlackBox { lens, wavelength_nm: wl, z_in: -offset_in, z_out: track + offset_out, pass_distance };
-        // Pupil boxes per input radius from a camera whose film is the input plane.
-        let cam = PrescriptionCamera::new(lens.clone(), offset_in, wl)?;
-        let r_end = cam.max_film_radius_mm;
-        // Pass region at radius r (rotated frame, point on +y): boxes are given
-        // for points on +x on the rear-vertex plane; map to the pass plane.
-        let scale = pass_distance / offset_in;
-        let region = |r: f64| -> Option<(DVec2, f64)> {
-            let b = cam.pupil_bounds_mm(r)?;
-            // Box on the rear plane (film point on +x) → rotate to +y → project.
-            let map = |x: f64, y: f64| DVec2::new(-y, x); // +x → +y rotation
-            let lo = map(b[0], b[2]);
-            let hi = map(b[1], b[3]);
-            let p_in = DVec2::new(0.0, r);
-            let proj = |q: DVec2| p_in + (q - p_in) * scale;
-            let (a, c) = (proj(lo), proj(hi));
-            let centre = (a + c) * 0.5;
-            let half = ((c - a).abs() * 0.5).max_element() * std::f64::consts::SQRT_2;
-            Some((centre, half))
-        };
-        // Boundary points of the pass region at radius r.
-        let boundary = |r: f64| -> Option<Vec<DVec2>> {
-            let (centre, half) = region(r)?;
-            let ng = 24;
-            let mut c = DVec2::ZERO;
-            let mut k = 0;
+        // The pass region lies near the exit pupil on the pass plane: search a
+        // square of half-width 3·(exit pupil radius) around the axis.
+        let half = 3.0 * pxw.exit_pupil_radius_mm.max(1e-6);
+        let grid_pass = |r: f64, ng: usize| -> Option<DVec2> {
+            let (mut c, mut k) = (DVec2::ZERO, 0);
             for i in 0..ng {
                 for j in 0..ng {
-                    let q = centre + DVec2::new(-half + 2.0 * half * (i as f64 + 0.5) / ng as f64, -half + 2.0 * half * (j as f64 + 0.5) / ng as f64);
+                    let q = DVec2::new(-half + 2.0 * half * (i as f64 + 0.5) / ng as f64, -half + 2.0 * half * (j as f64 + 0.5) / ng as f64);
                     if bb.passes(r, q) {
                         c += q;
                         k += 1;
                     }
                 }
             }
-            if k == 0 {
-                return None;
+            (k > 0).then(|| c / k as f64)
+        };
+        // Last input radius that passes light: scan, then bisect.
+        let step = 0.01 * f;
+        let mut r_pass = 0.0;
+        let mut misses = 0;
+        let mut r = 0.0;
+        while r < 5.0 * f && misses < 10 {
+            if grid_pass(r, 32).is_some() {
+                r_pass = r;
+                misses = 0;
+            } else {
+                misses += 1;
             }
-            let c = DVec2::new(0.0, c.y / k as f64);
+            r += step;
+        }
+        let (mut lo, mut hi) = (r_pass, r_pass + step);
+        for _ in 0..20 {
+            let mid = 0.5 * (lo + hi);
+            if grid_pass(mid, 48).is_some() { lo = mid } else { hi = mid }
+        }
+        let r_end = lo;
+        let region = |r: f64| -> Option<(DVec2, f64)> { grid_pass(r, 48).map(|c| (c, half)) };
+        // Boundary points of the pass region at radius r.
+        let boundary = |r: f64| -> Option<Vec<DVec2>> {
+            let (centre, half) = region(r)?;
+            let c = DVec2::new(0.0, centre.y);
             if !bb.passes(r, c) {
                 return None;
             }
@@ -409,37 +450,47 @@ pub fn fit_rtf(lens: &Prescription, wavelengths_nm: &[f64], opts: &FitOptions) -
             }
             Some(pts)
         };
-        // Ellipses.
+        // Boundaries of the pass region per field radius.
         let radii: Vec<f64> = (0..opts.n_ellipses).map(|k| r_end * k as f64 / (opts.n_ellipses - 1) as f64).collect();
-        let ell: Vec<Option<(DVec2, [f64; 2])>> = radii
-            .par_iter()
-            .map(|&r| {
-                let pts = boundary(r)?;
-                let (c, a) = min_area_ellipse(&pts, 1e-7)?;
-                let det = a[0][0] * a[1][1] - a[0][1] * a[1][0];
-                // Half-widths of the bounding box: sqrt of the diagonal of A⁻¹.
-                Some((c, [(a[1][1] / det).sqrt(), (a[0][0] / det).sqrt()]))
-            })
-            .collect();
-        let n_ok = ell.iter().take_while(|e| e.is_some()).count();
-        if n_ok < 2 {
-            return Err(Error::Invalid(format!("lens '{}': fewer than two field radii pass light", lens.name)));
+        let bounds: Vec<Option<Vec<DVec2>>> = radii.par_iter().map(|&r| boundary(r)).collect();
+        let n_ok = bounds.iter().take_while(|e| e.is_some()).count();
+        if n_ok < 4 {
+            return Err(Error::Invalid(format!("lens '{}': fewer than four field radii pass light", lens.name)));
         }
-        let pass = Ellipses {
-            positions_mm: radii[..n_ok].to_vec(),
-            radii_x_mm: ell[..n_ok].iter().map(|e| e.unwrap().1[0]).collect(),
-            radii_y_mm: ell[..n_ok].iter().map(|e| e.unwrap().1[1]).collect(),
-            centers_x_mm: ell[..n_ok].iter().map(|e| e.unwrap().0.x).collect(),
-            centers_y_mm: ell[..n_ok].iter().map(|e| e.unwrap().0.y).collect(),
-            plane_distance_mm: pass_distance,
+        let bounds: Vec<Vec<DVec2>> = bounds.into_iter().take(n_ok).map(|b| b.unwrap()).collect();
+        let radii = &radii[..n_ok];
+        let ellipses = || -> Result<PassNoPass> {
+            let ell: Vec<(DVec2, [f64; 2])> = bounds
+                .par_iter()
+                .map(|pts| {
+                    if opts.pass_method == PassMethod::AreaEllipses {
+                        return area_matched_ellipse(pts);
+                    }
+                    let (c, a) = min_area_ellipse(pts, 1e-7)?;
+                    let det = a[0][0] * a[1][1] - a[0][1] * a[1][0];
+                    // Half-widths of the bounding box: sqrt of the diagonal of A⁻¹.
+                    Some((c, [(a[1][1] / det).sqrt(), (a[0][0] / det).sqrt()]))
+                })
+                .collect::<Option<Vec<_>>>()
+                .ok_or_else(|| Error::Invalid(format!("lens '{}': degenerate pass region", lens.name)))?;
+            Ok(PassNoPass::Ellipses(Ellipses {
+                positions_mm: radii.to_vec(),
+                radii_x_mm: ell.iter().map(|e| e.1[0]).collect(),
+                radii_y_mm: ell.iter().map(|e| e.1[1]).collect(),
+                centers_x_mm: ell.iter().map(|e| e.0.x).collect(),
+                centers_y_mm: ell.iter().map(|e| e.0.y).collect(),
+                plane_distance_mm: pass_distance,
+            }))
         };
-        let r_last = pass.positions_mm[n_ok - 1];
+        let pass = ellipses()?;
+        let r_last = radii[n_ok - 1];
         // Polynomial data: polar grid inside each field's ellipse.
         let fields: Vec<f64> = (0..opts.n_field).map(|k| r_last * k as f64 / (opts.n_field - 1) as f64).collect();
         let data: Vec<([f64; 3], [f64; 5])> = fields
             .par_iter()
             .flat_map_iter(|&r| {
-                let [cx, cy, rx, ry] = pass.at(r).unwrap_or([0.0; 4]);
+                let [x0, x1, y0, y1] = pass.bbox(r).unwrap_or([0.0; 4]);
+                let (cx, cy, rx, ry) = (0.5 * (x0 + x1), 0.5 * (y0 + y1), 0.5 * (x1 - x0), 0.5 * (y1 - y0));
                 let mut v = Vec::new();
                 for i in 0..opts.n_rho {
                     let rho = ((i as f64 + 0.5) / opts.n_rho as f64).sqrt();

@@ -109,13 +109,97 @@ impl Ellipses {
     }
 }
 
+/// Pass/no-pass as an intersection of circles on a plane `plane_distance_mm`
+/// beyond the input plane (Goossens et al.): circle i has radius R_i and its
+/// centre at (0, s_i·r) in the rotated frame (input point on +y at radius r).
+/// JSON (`passnopass.method = "circles"`): `circleRadii`, `circleSensitivities`,
+/// `circlePlaneZ`, and optionally `maxInputRadius` (camsim: inputs beyond it
+/// are blocked).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Circles {
+    pub radii_mm: Vec<f64>,
+    pub sensitivities: Vec<f64>,
+    pub plane_distance_mm: f64,
+    pub max_input_radius_mm: Option<f64>,
+}
+
+/// The pass/no-pass test of one wavelength.
+#[derive(Clone, Debug, PartialEq)]
+pub enum PassNoPass {
+    Ellipses(Ellipses),
+    Circles(Circles),
+}
+
+impl PassNoPass {
+    pub fn plane_distance_mm(&self) -> f64 {
+        match self {
+            PassNoPass::Ellipses(e) => e.plane_distance_mm,
+            PassNoPass::Circles(c) => c.plane_distance_mm,
+        }
+    }
+    /// Largest input radius with a defined region (None: unlimited).
+    pub fn max_radius_mm(&self) -> Option<f64> {
+        match self {
+            PassNoPass::Ellipses(e) => e.positions_mm.last().copied(),
+            PassNoPass::Circles(c) => c.max_input_radius_mm,
+        }
+    }
+    /// Does the rotated ray meeting the pass plane at (x, y) from input radius r pass?
+    pub fn passes(&self, r: f64, x: f64, y: f64) -> bool {
+        match self {
+            PassNoPass::Ellipses(e) => match e.at(r) {
+                Some([cx, cy, rx, ry]) => ((x - cx) / rx).powi(2) + ((y - cy) / ry).powi(2) <= 1.0,
+                None => false,
+            },
+            PassNoPass::Circles(c) => {
+                if c.max_input_radius_mm.is_some_and(|m| r > m) {
+                    return false;
+                }
+                c.radii_mm.iter().zip(&c.sensitivities).all(|(rad, s)| x * x + (y - s * r).powi(2) <= rad * rad)
+            }
+        }
+    }
+    /// Bounding box [x0, x1, y0, y1] of the pass region at input radius r.
+    pub fn bbox(&self, r: f64) -> Option<[f64; 4]> {
+        match self {
+            PassNoPass::Ellipses(e) => e.at(r).map(|[cx, cy, rx, ry]| [cx - rx, cx + rx, cy - ry, cy + ry]),
+            PassNoPass::Circles(c) => {
+                if c.max_input_radius_mm.is_some_and(|m| r > m) {
+                    return None;
+                }
+                let mut b = [f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY];
+                for (rad, s) in c.radii_mm.iter().zip(&c.sensitivities) {
+                    b[0] = b[0].max(-rad);
+                    b[1] = b[1].min(*rad);
+                    b[2] = b[2].max(s * r - rad);
+                    b[3] = b[3].min(s * r + rad);
+                }
+                (b[0] < b[1] && b[2] < b[3]).then_some(b)
+            }
+        }
+    }
+    /// Largest |coordinate| any region reaches (for sampling bounds).
+    fn reach(&self, r: f64) -> f64 {
+        match self {
+            PassNoPass::Ellipses(e) => e
+                .centers_y_mm
+                .iter()
+                .zip(&e.radii_y_mm)
+                .map(|(c, r)| c.abs() + r)
+                .chain(e.centers_x_mm.iter().zip(&e.radii_x_mm).map(|(c, r)| c.abs() + r))
+                .fold(0.0, f64::max),
+            PassNoPass::Circles(c) => c.radii_mm.iter().zip(&c.sensitivities).map(|(rad, s)| (s * r).abs() + rad).fold(f64::INFINITY, f64::min),
+        }
+    }
+}
+
 /// RTF at one wavelength.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RtfWave {
     pub wavelength_nm: f64,
     /// outx, outy, outz, outdx, outdy, outdz (z and dz optional).
     pub outputs: [Option<Poly>; 6],
-    pub pass: Ellipses,
+    pub pass: PassNoPass,
 }
 
 const OUT_NAMES: [&str; 6] = ["outx", "outy", "outz", "outdx", "outdy", "outdz"];
@@ -161,24 +245,44 @@ impl Rtf {
             let wavelength_nm = f64_field(pw, "wavelength_nm", file)?;
             let pnp = pw.get("passnopass").ok_or_else(|| bad(file, &format!("polynomials[{wi}]: missing 'passnopass'")))?;
             let method = pnp.get("method").and_then(|m| m.as_str()).unwrap_or("minimalellipse");
-            if method != "minimalellipse" {
-                return Err(Error::NotSupported(format!("{}: pass/no-pass method '{method}' (only 'minimalellipse')", file.display())));
-            }
-            let pass = Ellipses {
-                positions_mm: vec_field(pnp, "positions", file)?,
-                radii_x_mm: vec_field(pnp, "radiiX", file)?,
-                radii_y_mm: vec_field(pnp, "radiiY", file)?,
-                centers_x_mm: vec_field(pnp, "centersX", file)?,
-                centers_y_mm: vec_field(pnp, "centersY", file)?,
-                plane_distance_mm: f64_field(pnp, "intersectPlaneDistance", file)?,
+            let pass = match method {
+                "minimalellipse" => {
+                    let e = Ellipses {
+                        positions_mm: vec_field(pnp, "positions", file)?,
+                        radii_x_mm: vec_field(pnp, "radiiX", file)?,
+                        radii_y_mm: vec_field(pnp, "radiiY", file)?,
+                        centers_x_mm: vec_field(pnp, "centersX", file)?,
+                        centers_y_mm: vec_field(pnp, "centersY", file)?,
+                        plane_distance_mm: f64_field(pnp, "intersectPlaneDistance", file)?,
+                    };
+                    let n = e.positions_mm.len();
+                    if n == 0 || [&e.radii_x_mm, &e.radii_y_mm, &e.centers_x_mm, &e.centers_y_mm].iter().any(|a| a.len() != n) {
+                        return Err(bad(file, &format!("polynomials[{wi}].passnopass: arrays must have equal, non-zero length")));
+                    }
+                    if e.positions_mm.windows(2).any(|w| w[1] <= w[0]) {
+                        return Err(bad(file, "passnopass 'positions' must increase"));
+                    }
+                    if e.radii_x_mm.iter().chain(&e.radii_y_mm).any(|r| !(*r > 0.0)) {
+                        return Err(bad(file, "passnopass radii must be > 0"));
+                    }
+                    PassNoPass::Ellipses(e)
+                }
+                "circles" => {
+                    let c = Circles {
+                        radii_mm: vec_field(pnp, "circleRadii", file)?,
+                        sensitivities: vec_field(pnp, "circleSensitivities", file)?,
+                        plane_distance_mm: f64_field(pnp, "circlePlaneZ", file)?,
+                        max_input_radius_mm: pnp.get("maxInputRadius").and_then(|v| v.as_f64()),
+                    };
+                    if c.radii_mm.is_empty() || c.radii_mm.len() != c.sensitivities.len() {
+                        return Err(bad(file, "passnopass: circleRadii and circleSensitivities must have equal, non-zero length"));
+                    }
+                    PassNoPass::Circles(c)
+                }
+                other => {
+                    return Err(Error::NotSupported(format!("{}: pass/no-pass method '{other}' (known: minimalellipse, circles)", file.display())));
+                }
             };
-            let n = pass.positions_mm.len();
-            if n == 0 || [&pass.radii_x_mm, &pass.radii_y_mm, &pass.centers_x_mm, &pass.centers_y_mm].iter().any(|a| a.len() != n) {
-                return Err(bad(file, &format!("polynomials[{wi}].passnopass: arrays must have equal, non-zero length")));
-            }
-            if pass.positions_mm.windows(2).any(|w| w[1] <= w[0]) {
-                return Err(bad(file, "passnopass 'positions' must increase"));
-            }
             let mut outputs: [Option<Poly>; 6] = Default::default();
             for p in pw.get("poly").and_then(|p| p.as_array()).ok_or_else(|| bad(file, "missing 'poly' array"))? {
                 let name = p.get("outputname").and_then(|n| n.as_str()).unwrap_or("");
@@ -243,14 +347,23 @@ impl Rtf {
                     .collect();
                 json!({
                     "wavelength_nm": w.wavelength_nm,
-                    "passnopass": {
-                        "method": "minimalellipse",
-                        "positions": w.pass.positions_mm,
-                        "radiiX": w.pass.radii_x_mm,
-                        "radiiY": w.pass.radii_y_mm,
-                        "centersX": w.pass.centers_x_mm,
-                        "centersY": w.pass.centers_y_mm,
-                        "intersectPlaneDistance": w.pass.plane_distance_mm,
+                    "passnopass": match &w.pass {
+                        PassNoPass::Ellipses(e) => json!({
+                            "method": "minimalellipse",
+                            "positions": e.positions_mm,
+                            "radiiX": e.radii_x_mm,
+                            "radiiY": e.radii_y_mm,
+                            "centersX": e.centers_x_mm,
+                            "centersY": e.centers_y_mm,
+                            "intersectPlaneDistance": e.plane_distance_mm,
+                        }),
+                        PassNoPass::Circles(c) => json!({
+                            "method": "circles",
+                            "circleRadii": c.radii_mm,
+                            "circleSensitivities": c.sensitivities,
+                            "circlePlaneZ": c.plane_distance_mm,
+                            "maxInputRadius": c.max_input_radius_mm,
+                        }),
                     },
                     "poly": poly,
                 })
@@ -294,11 +407,8 @@ impl Rtf {
         if !(d.z > 0.0) {
             return None;
         }
-        let [cx, cy, rx, ry] = w.pass.at(r)?;
-        let px = dx / d.z * w.pass.plane_distance_mm;
-        let py = r + dy / d.z * w.pass.plane_distance_mm;
-        let e = ((px - cx) / rx).powi(2) + ((py - cy) / ry).powi(2);
-        if !(e <= 1.0) {
+        let l = w.pass.plane_distance_mm();
+        if !w.pass.passes(r, dx / d.z * l, r + dy / d.z * l) {
             return None;
         }
         let deg = w.outputs.iter().flatten().map(|p| p.max_degree()).max().unwrap_or(0) as usize + 1;
@@ -361,29 +471,20 @@ impl RtfCamera {
     /// [x0, x1, y0, y1]; None when no input radius near r_film passes.
     pub fn sampling_box(&self, w: &RtfWave, r_film: f64) -> Option<[f64; 4]> {
         let g = self.input_plane_z_mm().abs();
-        let h = self.input_plane_z_mm() + w.pass.plane_distance_mm;
-        // Largest lateral slope reaching any ellipse from this film point.
-        let reach = w
-            .pass
-            .centers_y_mm
-            .iter()
-            .zip(&w.pass.radii_y_mm)
-            .map(|(c, r)| c.abs() + r)
-            .fold(0.0, f64::max)
-            .max(w.pass.centers_x_mm.iter().zip(&w.pass.radii_x_mm).map(|(c, r)| c.abs() + r).fold(0.0, f64::max));
+        let h = self.input_plane_z_mm() + w.pass.plane_distance_mm();
+        // Largest lateral slope reaching any pass region from this film point.
+        let reach = w.pass.reach(r_film + g);
         let slope = (r_film + reach) / h.abs().max(1e-9);
         let delta = g * slope * 1.05;
         let mut b = [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY];
         let n = 16;
         for i in 0..=n {
             let r = r_film - delta + 2.0 * delta * i as f64 / n as f64;
-            if let Some([cx, cy, rx, ry]) = w.pass.at(r.max(0.0)) {
-                // The ellipse is given in the input point's rotated frame; points of
-                // the pass plane shift with r only through the interpolation.
-                b[0] = b[0].min(cx - rx);
-                b[1] = b[1].max(cx + rx);
-                b[2] = b[2].min(cy - ry);
-                b[3] = b[3].max(cy + ry);
+            if let Some(q) = w.pass.bbox(r.max(0.0)) {
+                b[0] = b[0].min(q[0]);
+                b[1] = b[1].max(q[1]);
+                b[2] = b[2].min(q[2]);
+                b[3] = b[3].max(q[3]);
             }
         }
         if !b[0].is_finite() {
@@ -410,7 +511,7 @@ impl Camera for RtfCamera {
         let (qx, qy) = (b[0] + u.x * (b[1] - b[0]), b[2] + u.y * (b[3] - b[2]));
         let q = DVec2::new(qx * c + qy * s, -qx * s + qy * c);
         let z_in = self.input_plane_z_mm();
-        let h = z_in + w.pass.plane_distance_mm;
+        let h = z_in + w.pass.plane_distance_mm();
         if !(h > 0.0) {
             return None;
         }
