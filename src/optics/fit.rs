@@ -360,8 +360,14 @@ fn rim_sag(radius: f64, semi: f64) -> f64 {
 
 /// Fit an RTF to `lens` at each wavelength; returns the RTF and per-output reports.
 pub fn fit_rtf(lens: &Prescription, wavelengths_nm: &[f64], opts: &FitOptions) -> Result<(Rtf, Vec<FitReport>)> {
-    if opts.degree > 24 {
-        return Err(Error::Invalid(format!("RTF degree {} is above the supported 24", opts.degree)));
+    fit_rtf_degrees(lens, wavelengths_nm, &[opts.degree], opts)?.pop().ok_or_else(|| Error::Invalid("no fit".into()))
+}
+
+/// Fit RTFs of several degrees from one set of traced data (`opts.degree`
+/// is ignored); one (RTF, reports) per degree, in order.
+pub fn fit_rtf_degrees(lens: &Prescription, wavelengths_nm: &[f64], degrees: &[usize], opts: &FitOptions) -> Result<Vec<(Rtf, Vec<FitReport>)>> {
+    if let Some(d) = degrees.iter().find(|&&d| d > 24) {
+        return Err(Error::Invalid(format!("RTF degree {d} is above the supported 24")));
     }
     if wavelengths_nm.is_empty() || wavelengths_nm.iter().any(|w| !(w.is_finite() && *w > 0.0)) {
         return Err(Error::Invalid("fit-rtf: wavelengths must be positive numbers (nm)".into()));
@@ -380,8 +386,7 @@ pub fn fit_rtf(lens: &Prescription, wavelengths_nm: &[f64], opts: &FitOptions) -
     let offset_in = (0.98 * px.back_focal_distance_mm).max(rear_sag + 0.01 * f);
     let offset_out = front_sag + 0.01 * f;
     let track = lens.total_track_mm();
-    let mut waves = Vec::new();
-    let mut reports = Vec::new();
+    let mut per_degree: Vec<(Vec<RtfWave>, Vec<FitReport>)> = degrees.iter().map(|_| (Vec::new(), Vec::new())).collect();
     for &wl in wavelengths_nm {
         let pxw = lens.paraxial(wl)?;
         let xp = -pxw.exit_pupil_from_rear_mm; // lens-frame z of the exit pupil
@@ -504,7 +509,9 @@ pub fn fit_rtf(lens: &Prescription, wavelengths_nm: &[f64], opts: &FitOptions) -
                 v
             })
             .collect();
-        let terms = monomials(opts.degree);
+        for (di, &degree) in degrees.iter().enumerate() {
+        let (waves, reports) = &mut per_degree[di];
+        let terms = monomials(degree);
         if data.len() < 2 * terms.len() {
             return Err(Error::Invalid(format!(
                 "lens '{}': {} traced samples for {} monomials; use more samples or a lower degree",
@@ -515,7 +522,7 @@ pub fn fit_rtf(lens: &Prescription, wavelengths_nm: &[f64], opts: &FitOptions) -
         }
         let r_s = r_last.max(1e-9);
         let d_s = data.iter().map(|s| s.0[1].abs().max(s.0[2].abs())).fold(1e-12, f64::max);
-        let deg = opts.degree + 1;
+        let deg = degree + 1;
         let pows = |v: f64| {
             let mut p = vec![1.0; deg];
             for i in 1..deg {
@@ -547,12 +554,12 @@ pub fn fit_rtf(lens: &Prescription, wavelengths_nm: &[f64], opts: &FitOptions) -
             let poly = Poly { terms: terms.clone(), coeff };
             let res: Vec<f64> = data.iter().map(|s| poly.eval(s.0[0], s.0[1], s.0[2]) - s.1[k]).collect();
             if res.iter().any(|v| !v.is_finite()) {
-                return Err(Error::Invalid(format!("lens '{}': degree-{} fit of {} is not finite", lens.name, opts.degree, names[k])));
+                return Err(Error::Invalid(format!("lens '{}': degree-{} fit of {} is not finite", lens.name, degree, names[k])));
             }
             reports.push(FitReport {
                 wavelength_nm: wl,
                 output: names[k].to_string(),
-                degree: opts.degree,
+                degree: degree,
                 n_terms: terms.len(),
                 n_samples: data.len(),
                 n_dropped: terms.len() - sol.rank,
@@ -563,17 +570,24 @@ pub fn fit_rtf(lens: &Prescription, wavelengths_nm: &[f64], opts: &FitOptions) -
             outputs[slots[k]] = Some(poly);
         }
         outputs[2] = Some(Poly { terms: vec![[0, 0, 0]], coeff: vec![offset_in + track + offset_out] });
-        waves.push(RtfWave { wavelength_nm: wl, outputs, pass });
+        waves.push(RtfWave { wavelength_nm: wl, outputs, pass: pass.clone() });
+        }
     }
-    let rtf = Rtf {
-        name: format!("{}-rtf-degree{}", lens.name, opts.degree),
-        description: format!("RTF fitted by camsim to prescription '{}', degree {}", lens.name, opts.degree),
-        thickness_mm: track,
-        plane_offset_input_mm: offset_in,
-        plane_offset_output_mm: offset_out,
-        waves,
-    };
-    Ok((rtf, reports))
+    Ok(degrees
+        .iter()
+        .zip(per_degree)
+        .map(|(degree, (waves, reports))| {
+            let rtf = Rtf {
+                name: format!("{}-rtf-degree{degree}", lens.name),
+                description: format!("RTF fitted by camsim to prescription '{}', degree {degree}", lens.name),
+                thickness_mm: track,
+                plane_offset_input_mm: offset_in,
+                plane_offset_output_mm: offset_out,
+                waves,
+            };
+            (rtf, reports)
+        })
+        .collect())
 }
 
 #[cfg(test)]
