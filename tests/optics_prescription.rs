@@ -55,9 +55,11 @@ fn optics_film_distance_focuses_near_object() {
     let mut zs = Vec::new();
     for &(ux, uy) in &[(0.5, 0.51), (0.51, 0.5), (0.49, 0.5), (0.5, 0.49)] {
         let r = cam.sample_ray(DVec2::ZERO, DVec2::new(ux, uy), 550.0).unwrap();
-        let rho = DVec2::new(r.origin.x, r.origin.y).length();
-        let slope = DVec2::new(r.direction.x, r.direction.y).length() / r.direction.z;
-        zs.push(r.origin.z + rho / slope);
+        // Signed: the ray must reach the axis *ahead* (t > 0), not diverge.
+        let (o, d) = (DVec2::new(r.origin.x, r.origin.y), DVec2::new(r.direction.x, r.direction.y));
+        let t = -o.dot(d) / d.length_squared();
+        assert!(t > 0.0, "rays diverge");
+        zs.push(r.origin.z + t * r.direction.z);
     }
     for z in zs {
         // Rays 1 % of the pupil off axis: spherical aberration shifts the

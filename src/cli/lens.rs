@@ -89,7 +89,14 @@ pub fn run(c: LensCmd) -> Result<i32> {
             if !(a.object_distance_m.is_finite() && a.object_distance_m > 0.0) {
                 return Err(Error::Invalid(format!("--object-distance-m must be > 0 and finite, got {}", a.object_distance_m)));
             }
-            let cam = analysis::lens_camera(lens, a.film_distance_mm, None, DEFAULT_WAVELENGTH_NM)?;
+            // Without a film distance a prescription is focused on the object
+            // (paraxial); an RTF uses its infinity-focus film distance.
+            let film = match (&lens, a.film_distance_mm) {
+                (_, Some(d)) => Some(d),
+                (LensFile::Prescription(p), None) => Some(p.image_distance_mm(a.object_distance_m * 1e3, DEFAULT_WAVELENGTH_NM)?),
+                (LensFile::Rtf(_), None) => None,
+            };
+            let cam = analysis::lens_camera(lens, film, None, DEFAULT_WAVELENGTH_NM)?;
             let z_obj = cam.front_vertex_z_mm() + a.object_distance_m * 1e3;
             let field = a.field_mm.unwrap_or(0.0);
             let half = analysis::blur_half_width_um(cam.camera(), z_obj, field, DEFAULT_WAVELENGTH_NM);

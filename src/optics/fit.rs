@@ -65,7 +65,7 @@ pub enum PassMethod {
 
 impl Default for FitOptions {
     fn default() -> Self {
-        Self { degree: 5, n_field: 24, n_rho: 8, n_theta: 24, n_ellipses: 41, pass_method: PassMethod::Ellipses }
+        Self { degree: 5, n_field: 24, n_rho: 8, n_theta: 24, n_ellipses: 25, pass_method: PassMethod::Ellipses }
     }
 }
 
@@ -412,12 +412,12 @@ pub fn fit_rtf_degrees(lens: &Prescription, wavelengths_nm: &[f64], degrees: &[u
             (k > 0).then(|| c / k as f64)
         };
         // Last input radius that passes light: scan, then bisect.
-        let step = 0.01 * f;
+        let step = 0.02 * f;
         let mut r_pass = 0.0;
         let mut misses = 0;
         let mut r = 0.0;
         while r < 5.0 * f && misses < 10 {
-            if grid_pass(r, 32).is_some() {
+            if grid_pass(r, 24).is_some() {
                 r_pass = r;
                 misses = 0;
             } else {
@@ -426,7 +426,7 @@ pub fn fit_rtf_degrees(lens: &Prescription, wavelengths_nm: &[f64], degrees: &[u
             r += step;
         }
         let (mut lo, mut hi) = (r_pass, r_pass + step);
-        for _ in 0..20 {
+        for _ in 0..16 {
             let mid = 0.5 * (lo + hi);
             if grid_pass(mid, 48).is_some() { lo = mid } else { hi = mid }
         }
@@ -439,13 +439,13 @@ pub fn fit_rtf_degrees(lens: &Prescription, wavelengths_nm: &[f64], degrees: &[u
             if !bb.passes(r, c) {
                 return None;
             }
-            let na = 96;
+            let na = 64;
             let mut pts = Vec::with_capacity(2 * na);
             for a in 0..na {
                 let th = std::f64::consts::TAU * (a as f64 + 0.5) / na as f64;
                 let dir = DVec2::new(th.cos(), th.sin());
                 let (mut lo, mut hi) = (0.0, 4.0 * half);
-                for _ in 0..40 {
+                for _ in 0..30 {
                     let mid = 0.5 * (lo + hi);
                     if bb.passes(r, c + dir * mid) { lo = mid } else { hi = mid }
                 }

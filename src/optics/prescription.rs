@@ -368,7 +368,7 @@ impl Prescription {
             return Ok(self.paraxial(lambda_nm)?.back_focal_distance_mm);
         }
         let u0 = 1e-3;
-        let (_, y, u) = self.paraxial_trace(0, object_from_front_mm * u0, -u0, lambda_nm);
+        let (_, y, u) = self.paraxial_trace(0, object_from_front_mm * u0, u0, lambda_nm);
         let d = -y / u;
         if !(u < 0.0 && d > 0.0 && d.is_finite()) {
             return Err(Error::Invalid(format!("lens '{}': an object {object_from_front_mm} mm away has no real image", self.name)));

@@ -202,6 +202,10 @@ pub struct RtfWave {
     pub pass: PassNoPass,
 }
 
+/// Highest exponent + 1 evaluated on the stack (exponents are validated < 64
+/// when read; degrees above 63 are rejected there).
+const MAX_POWERS: usize = 64;
+
 const OUT_NAMES: [&str; 6] = ["outx", "outy", "outz", "outdx", "outdy", "outdz"];
 
 /// A ray-transfer function.
@@ -411,10 +415,10 @@ impl Rtf {
         if !w.pass.passes(r, dx / d.z * l, r + dy / d.z * l) {
             return None;
         }
-        let deg = w.outputs.iter().flatten().map(|p| p.max_degree()).max().unwrap_or(0) as usize + 1;
-        let mut pr = vec![1.0; deg];
-        let mut px_ = vec![1.0; deg];
-        let mut py_ = vec![1.0; deg];
+        let deg = (w.outputs.iter().flatten().map(|p| p.max_degree()).max().unwrap_or(0) as usize + 1).min(MAX_POWERS);
+        let mut pr = [1.0; MAX_POWERS];
+        let mut px_ = [1.0; MAX_POWERS];
+        let mut py_ = [1.0; MAX_POWERS];
         for i in 1..deg {
             pr[i] = pr[i - 1] * r;
             px_[i] = px_[i - 1] * dx;
@@ -449,6 +453,8 @@ impl Rtf {
 pub struct RtfCamera {
     pub rtf: Rtf,
     pub film_distance_mm: f64,
+    /// Per wavelength: largest |coordinate| of any pass region (sampling bound).
+    reach_mm: Vec<f64>,
 }
 
 impl RtfCamera {
@@ -456,7 +462,15 @@ impl RtfCamera {
         if !(film_distance_mm.is_finite() && film_distance_mm > 0.0) {
             return Err(Error::Invalid(format!("RTF '{}': film distance must be > 0 mm, got {film_distance_mm}", rtf.name)));
         }
-        Ok(Self { rtf, film_distance_mm })
+        let reach_mm = rtf
+            .waves
+            .iter()
+            .map(|w| {
+                let r_top = w.pass.max_radius_mm().unwrap_or(10.0 * film_distance_mm.max(rtf.thickness_mm));
+                w.pass.reach(r_top)
+            })
+            .collect();
+        Ok(Self { rtf, film_distance_mm, reach_mm })
     }
     /// Input plane position (film at 0), mm.
     pub fn input_plane_z_mm(&self) -> f64 {
@@ -473,11 +487,12 @@ impl RtfCamera {
         let g = self.input_plane_z_mm().abs();
         let h = self.input_plane_z_mm() + w.pass.plane_distance_mm();
         // Largest lateral slope reaching any pass region from this film point.
-        let reach = w.pass.reach(r_film + g);
+        let wi = self.rtf.waves.iter().position(|x| std::ptr::eq(x, w)).unwrap_or(0);
+        let reach = self.reach_mm.get(wi).copied().unwrap_or_else(|| w.pass.reach(r_film + g));
         let slope = (r_film + reach) / h.abs().max(1e-9);
         let delta = g * slope * 1.05;
         let mut b = [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY];
-        let n = 16;
+        let n = 8;
         for i in 0..=n {
             let r = r_film - delta + 2.0 * delta * i as f64 / n as f64;
             if let Some(q) = w.pass.bbox(r.max(0.0)) {
@@ -491,7 +506,7 @@ impl RtfCamera {
             return None;
         }
         // Linear interpolation between listed ellipses stays inside the union of
-        // the sampled ones up to the spacing of the 17 probes; grow by 2 %.
+        // the sampled ones up to the spacing of the 9 probes; grow by 2 %.
         // The input point's own frame is rotated from the film point's by at most
         // ≈ delta/r, which moves the ellipse by at most ≈ delta: grow by that too.
         let mx = 0.02 * (b[1] - b[0]) + delta;
