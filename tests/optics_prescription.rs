@@ -40,7 +40,11 @@ fn optics_thick_singlet_matches_lensmaker_equation() {
     let inv_f = (n - 1.0) * (1.0 / r1 - 1.0 / r2 + (n - 1.0) * d / (n * r1 * r2));
     let f = 1.0 / inv_f;
     // Paraxial trace is exact first-order optics: agreement to rounding.
-    assert!((px.effective_focal_length_mm / f - 1.0).abs() < 1e-12, "{} vs {f}", px.effective_focal_length_mm);
+    assert!(
+        (px.effective_focal_length_mm / f - 1.0).abs() < 1e-12,
+        "{} vs {f}",
+        px.effective_focal_length_mm
+    );
     // Back focal distance: f·(1 − (n−1)·d/(n·R1)).
     let bfd = f * (1.0 - (n - 1.0) * d / (n * r1));
     assert!((px.back_focal_distance_mm / bfd - 1.0).abs() < 1e-12);
@@ -48,15 +52,21 @@ fn optics_thick_singlet_matches_lensmaker_equation() {
 
 #[test]
 fn optics_film_distance_focuses_near_object() {
-    let lens = Prescription::load(Path::new("lenses/prescriptions/dgauss.28deg-zemax.json")).unwrap();
+    let lens =
+        Prescription::load(Path::new("lenses/prescriptions/dgauss.28deg-zemax.json")).unwrap();
     let z_obj_m = 1.5; // from the film
     let cam = PrescriptionCamera::focused(lens, z_obj_m, 550.0).unwrap();
     // Near-axis rays from the film centre must cross the axis at the object.
     let mut zs = Vec::new();
     for &(ux, uy) in &[(0.5, 0.51), (0.51, 0.5), (0.49, 0.5), (0.5, 0.49)] {
-        let r = cam.sample_ray(DVec2::ZERO, DVec2::new(ux, uy), 550.0).unwrap();
+        let r = cam
+            .sample_ray(DVec2::ZERO, DVec2::new(ux, uy), 550.0)
+            .unwrap();
         // Signed: the ray must reach the axis *ahead* (t > 0), not diverge.
-        let (o, d) = (DVec2::new(r.origin.x, r.origin.y), DVec2::new(r.direction.x, r.direction.y));
+        let (o, d) = (
+            DVec2::new(r.origin.x, r.origin.y),
+            DVec2::new(r.direction.x, r.direction.y),
+        );
         let t = -o.dot(d) / d.length_squared();
         assert!(t > 0.0, "rays diverge");
         zs.push(r.origin.z + t * r.direction.z);
@@ -64,7 +74,10 @@ fn optics_film_distance_focuses_near_object() {
     for z in zs {
         // Rays 1 % of the pupil off axis: spherical aberration shifts the
         // crossing by far less than 0.5 % of the distance.
-        assert!((z / z_obj_m - 1.0).abs() < 5e-3, "axis crossing at {z} m, want {z_obj_m} m");
+        assert!(
+            (z / z_obj_m - 1.0).abs() < 5e-3,
+            "axis crossing at {z} m, want {z_obj_m} m"
+        );
     }
 }
 
@@ -75,15 +88,23 @@ fn optics_dat_and_json_prescriptions_agree() {
     assert_eq!(a.surfaces.len(), b.surfaces.len());
     for (s, t) in a.surfaces.iter().zip(&b.surfaces) {
         // The JSON holds single-precision values.
-        assert!((s.radius_mm - t.radius_mm).abs() < 1e-5 && (s.thickness_mm - t.thickness_mm).abs() < 1e-5);
-        assert!((s.ior.at(550.0) - t.ior.at(550.0)).abs() < 1e-6 && (s.semi_aperture_mm - t.semi_aperture_mm).abs() < 1e-5);
+        assert!(
+            (s.radius_mm - t.radius_mm).abs() < 1e-5
+                && (s.thickness_mm - t.thickness_mm).abs() < 1e-5
+        );
+        assert!(
+            (s.ior.at(550.0) - t.ior.at(550.0)).abs() < 1e-6
+                && (s.semi_aperture_mm - t.semi_aperture_mm).abs() < 1e-5
+        );
         assert_eq!(s.is_stop, t.is_stop);
     }
 }
 
 #[test]
 fn optics_prescription_bad_input_errors_name_the_file() {
-    let e = Prescription::load(Path::new("lenses/prescriptions/missing.json")).unwrap_err().to_string();
+    let e = Prescription::load(Path::new("lenses/prescriptions/missing.json"))
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("missing.json"), "{e}");
     let (_d, p) = write_tmp("bad.json", "{\"surfaces\": [ {\"radius\": 1, }");
     let e = Prescription::load(&p).unwrap_err().to_string();
@@ -91,10 +112,26 @@ fn optics_prescription_bad_input_errors_name_the_file() {
     let (_d, p) = write_tmp("bad.dat", "# c\n50\n1 2 3\n");
     let e = Prescription::load(&p).unwrap_err().to_string();
     assert!(e.contains("bad.dat:3:") && e.contains("found 3"), "{e}");
-    let (_d, p) = write_tmp("nan.json", r#"{"surfaces":[{"radius":1,"thickness":1,"ior":1.5,"semi_aperture":0}]}"#);
-    assert!(Prescription::load(&p).unwrap_err().to_string().contains("semi-aperture"));
-    let (_d, p) = write_tmp("asph.json", r#"{"surfaces":[{"radius":10,"thickness":1,"ior":1.5,"semi_aperture":2,"aspheric_coefficients":[0.1]}]}"#);
-    assert!(Prescription::load(&p).unwrap_err().to_string().contains("not supported"));
+    let (_d, p) = write_tmp(
+        "nan.json",
+        r#"{"surfaces":[{"radius":1,"thickness":1,"ior":1.5,"semi_aperture":0}]}"#,
+    );
+    assert!(
+        Prescription::load(&p)
+            .unwrap_err()
+            .to_string()
+            .contains("semi-aperture")
+    );
+    let (_d, p) = write_tmp(
+        "asph.json",
+        r#"{"surfaces":[{"radius":10,"thickness":1,"ior":1.5,"semi_aperture":2,"aspheric_coefficients":[0.1]}]}"#,
+    );
+    assert!(
+        Prescription::load(&p)
+            .unwrap_err()
+            .to_string()
+            .contains("not supported")
+    );
 }
 
 /// Per-wavelength indices make the lens dispersive and move the focus.
@@ -126,14 +163,19 @@ fn optics_total_internal_reflection_blocks() {
     let steep = DVec3::new(1.0, 0.0, 1.0);
     assert_eq!(lens.trace_to_scene(o, steep, 550.0), Err(Blocked::Tir(0)));
     // 30°: refracts to asin(0.75) (Snell).
-    let (_, d) = lens.trace_to_scene(o, DVec3::new(0.5, 0.0, 0.75f64.sqrt()), 550.0).unwrap();
+    let (_, d) = lens
+        .trace_to_scene(o, DVec3::new(0.5, 0.0, 0.75f64.sqrt()), 550.0)
+        .unwrap();
     // The 1e9 mm "flat" face tilts the normal by ≤ 1e-8 rad at these heights.
     assert!((d.x - 0.75).abs() < 1e-7, "{d}");
     // Just below the critical angle still passes; just above is TIR.
     let crit = (1.0f64 / 1.5).asin();
     let dir = |a: f64| DVec3::new(a.sin(), 0.0, a.cos());
     assert!(lens.trace_to_scene(o, dir(crit - 1e-6), 550.0).is_ok());
-    assert_eq!(lens.trace_to_scene(o, dir(crit + 1e-6), 550.0), Err(Blocked::Tir(0)));
+    assert_eq!(
+        lens.trace_to_scene(o, dir(crit + 1e-6), 550.0),
+        Err(Blocked::Tir(0))
+    );
 }
 
 /// Rays grazing the aperture stop: bisection on the pupil height finds the
@@ -151,11 +193,19 @@ fn optics_rays_grazing_the_stop() {
     assert!(through(lo).is_ok() && through(hi).is_err());
     for _ in 0..200 {
         let mid = 0.5 * (lo + hi);
-        if through(mid).is_ok() { lo = mid } else { hi = mid }
+        if through(mid).is_ok() {
+            lo = mid
+        } else {
+            hi = mid
+        }
     }
     let (p, dir) = through(lo).unwrap();
     assert!(p.is_finite() && dir.is_finite() && (dir.length() - 1.0).abs() < 1e-12);
-    assert_eq!(through(hi), Err(Blocked::Aperture(stop)), "on-axis beam is limited by the stop");
+    assert_eq!(
+        through(hi),
+        Err(Blocked::Aperture(stop)),
+        "on-axis beam is limited by the stop"
+    );
 }
 
 /// On-axis irradiance of the traced lens equals π/(4N²) with the paraxial
@@ -163,12 +213,16 @@ fn optics_rays_grazing_the_stop() {
 /// real-ray cone matches the paraxial one to ≈1 %; 2 % tolerance.
 #[test]
 fn optics_prescription_on_axis_irradiance_matches_f_number() {
-    let lens = Prescription::load(Path::new("lenses/prescriptions/dgauss.28deg-zemax.json")).unwrap();
+    let lens =
+        Prescription::load(Path::new("lenses/prescriptions/dgauss.28deg-zemax.json")).unwrap();
     let n = lens.paraxial(550.0).unwrap().f_number;
     let cam = PrescriptionCamera::focused(lens, f64::INFINITY, 550.0).unwrap();
     let e = camsim::optics::analysis::irradiance_factor(&cam, DVec2::ZERO, 550.0, 128);
     let ideal = std::f64::consts::PI / (4.0 * n * n);
-    assert!((e / ideal - 1.0).abs() < 0.02, "E/L = {e}, π/(4N²) = {ideal}");
+    assert!(
+        (e / ideal - 1.0).abs() < 0.02,
+        "E/L = {e}, π/(4N²) = {ideal}"
+    );
 }
 
 /// Flat field: pupil boxes change at 64 film-radius buckets. The estimator
@@ -178,7 +232,8 @@ fn optics_prescription_on_axis_irradiance_matches_f_number() {
 /// drop light on one side and show up as a ring.
 #[test]
 fn optics_flat_field_has_no_rings() {
-    let lens = Prescription::load(Path::new("lenses/prescriptions/dgauss.28deg-zemax.json")).unwrap();
+    let lens =
+        Prescription::load(Path::new("lenses/prescriptions/dgauss.28deg-zemax.json")).unwrap();
     let cam = PrescriptionCamera::focused(lens, f64::INFINITY, 550.0).unwrap();
     let rmax = cam.max_film_radius_mm;
     let mut rng = Rng(7);
@@ -187,7 +242,9 @@ fn optics_flat_field_has_no_rings() {
         let (mut s, mut s2) = (0.0, 0.0);
         for _ in 0..n {
             let u = DVec2::new(rng.next(), rng.next());
-            let w = cam.sample_ray(DVec2::new(0.0, r_mm * 1e-3), u, 550.0).map_or(0.0, |r| r.weight);
+            let w = cam
+                .sample_ray(DVec2::new(0.0, r_mm * 1e-3), u, 550.0)
+                .map_or(0.0, |r| r.weight);
             s += w;
             s2 += w * w;
         }

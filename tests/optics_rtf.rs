@@ -35,7 +35,11 @@ fn optics_pixel4a_rtf_relative_illumination_matches_zemax() {
         .args(["lens", "ri", P4A, "--film-distance-mm", "0.465136"])
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let text = String::from_utf8(out.stdout).unwrap();
     let mut lines = text.lines();
     assert_eq!(lines.next(), Some("field_height_mm,relative_illumination"));
@@ -63,8 +67,12 @@ fn optics_rtf_fields_beyond_last_ellipse_are_vignetted() {
         let n = 40;
         (0..n * n)
             .filter(|k| {
-                let u = DVec2::new((k % n) as f64 / n as f64 + 0.5 / n as f64, (k / n) as f64 / n as f64 + 0.5 / n as f64);
-                cam.sample_ray(DVec2::new(h_mm * 1e-3 * 0.6, h_mm * 1e-3 * 0.8), u, 550.0).is_some()
+                let u = DVec2::new(
+                    (k % n) as f64 / n as f64 + 0.5 / n as f64,
+                    (k / n) as f64 / n as f64 + 0.5 / n as f64,
+                );
+                cam.sample_ray(DVec2::new(h_mm * 1e-3 * 0.6, h_mm * 1e-3 * 0.8), u, 550.0)
+                    .is_some()
             })
             .count()
     };
@@ -94,7 +102,12 @@ fn optics_rtf_rays_are_well_formed() {
         for j in 0..20 {
             let u = DVec2::new((i as f64 + 0.5) / 20.0, (j as f64 + 0.5) / 20.0);
             if let Some(r) = cam.sample_ray(DVec2::new(2.0e-3, 0.0), u, 550.0) {
-                assert!(r.origin.is_finite() && r.direction.is_finite() && r.weight.is_finite() && r.weight > 0.0);
+                assert!(
+                    r.origin.is_finite()
+                        && r.direction.is_finite()
+                        && r.weight.is_finite()
+                        && r.weight > 0.0
+                );
                 assert!((r.direction.length() - 1.0).abs() < 1e-12 && r.direction.z > 0.0);
                 assert!((r.origin.z - z_out_m).abs() < 1e-12);
                 sum_dx += r.direction.x;
@@ -109,8 +122,12 @@ fn optics_rtf_rays_are_well_formed() {
 fn optics_rtf_bad_files_are_reported() {
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("broken.json");
-    let mut v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(P4A).unwrap()).unwrap();
-    v["polynomials"][0]["passnopass"].as_object_mut().unwrap().remove("radiiX");
+    let mut v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(P4A).unwrap()).unwrap();
+    v["polynomials"][0]["passnopass"]
+        .as_object_mut()
+        .unwrap()
+        .remove("radiiX");
     std::fs::write(&p, v.to_string()).unwrap();
     let e = Rtf::load(&p).unwrap_err().to_string();
     assert!(e.contains("broken.json") && e.contains("radiiX"), "{e}");
@@ -118,7 +135,12 @@ fn optics_rtf_bad_files_are_reported() {
     std::fs::write(&p, v.to_string()).unwrap();
     assert!(Rtf::load(&p).unwrap_err().to_string().contains("magic"));
     std::fs::write(&p, "{ \"polynomials\": [ }").unwrap();
-    assert!(Rtf::load(&p).unwrap_err().to_string().contains("broken.json:1:"));
+    assert!(
+        Rtf::load(&p)
+            .unwrap_err()
+            .to_string()
+            .contains("broken.json:1:")
+    );
     assert!(RtfCamera::new(Rtf::load(Path::new(P4A)).unwrap(), f64::NAN).is_err());
 }
 
@@ -127,7 +149,8 @@ fn optics_rtf_bad_files_are_reported() {
 /// at distance h = z_in + L: E/L = π R²/(h² + R²).
 #[test]
 fn optics_rtf_circles_variant_on_axis_irradiance() {
-    let mut v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(P4A).unwrap()).unwrap();
+    let mut v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(P4A).unwrap()).unwrap();
     v["polynomials"][0]["passnopass"] = serde_json::json!({
         "method": "circles", "circleRadii": [0.4], "circleSensitivities": [0.0], "circlePlaneZ": 2.5
     });

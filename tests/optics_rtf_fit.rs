@@ -65,7 +65,13 @@ fn rmse_norm(a: &[f64], reference: &[f64]) -> f64 {
     let mut top: Vec<f64> = reference.to_vec();
     top.sort_by(|x, y| y.total_cmp(x));
     let norm = top.iter().take(10).sum::<f64>() / 10.0;
-    (a.iter().zip(reference).map(|(x, y)| (x - y).powi(2)).sum::<f64>() / a.len() as f64).sqrt() / norm
+    (a.iter()
+        .zip(reference)
+        .map(|(x, y)| (x - y).powi(2))
+        .sum::<f64>()
+        / a.len() as f64)
+        .sqrt()
+        / norm
 }
 
 struct Row {
@@ -93,7 +99,13 @@ fn evaluate(case: &Case, rows: &mut Vec<Row>) {
     let pos: Vec<f64> = zemax_esf.iter().map(|p| p.0).collect();
     let z_obj = film_esf + track + case.object_mm;
     let ri_of = |cam: &dyn Camera| relative_illumination(cam, &heights, 550.0, 96).unwrap();
-    let esf_of = |cam: &dyn Camera| edge_spread(cam, z_obj, 0.0, &pos, 550.0, 40).unwrap().into_iter().map(|e| e.0).collect::<Vec<_>>();
+    let esf_of = |cam: &dyn Camera| {
+        edge_spread(cam, z_obj, 0.0, &pos, 550.0, 40)
+            .unwrap()
+            .into_iter()
+            .map(|e| e.0)
+            .collect::<Vec<_>>()
+    };
     let ri_p = ri_of(&presc_inf);
     let esf_p = esf_of(&presc_esf);
     let zemax_esf_v: Vec<f64> = zemax_esf.iter().map(|p| p.1).collect();
@@ -117,7 +129,11 @@ fn evaluate(case: &Case, rows: &mut Vec<Row>) {
     let mut push_rtf = |model: String, rtf: &Rtf, cond: f64| {
         let ri_r = ri_of(&RtfCamera::new(rtf.clone(), bfd).unwrap());
         let esf_r = esf_of(&RtfCamera::new(rtf.clone(), film_esf).unwrap());
-        let ri_err = ri_r.iter().zip(&ri_p).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        let ri_err = ri_r
+            .iter()
+            .zip(&ri_p)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
         rows.push(Row {
             lens: case.name,
             model,
@@ -128,17 +144,35 @@ fn evaluate(case: &Case, rows: &mut Vec<Row>) {
             cond,
         });
     };
-    let opts = FitOptions { pass_method: PassMethod::AreaEllipses, ..Default::default() };
-    for (d, (rtf, rep)) in DEGREES.iter().zip(fit_rtf_degrees(&lens, &[550.0], &DEGREES, &opts).unwrap()) {
+    let opts = FitOptions {
+        pass_method: PassMethod::AreaEllipses,
+        ..Default::default()
+    };
+    for (d, (rtf, rep)) in DEGREES
+        .iter()
+        .zip(fit_rtf_degrees(&lens, &[550.0], &DEGREES, &opts).unwrap())
+    {
         // The JSON round trip is what renders: write and read back.
         let back = Rtf::from_value(&rtf.to_json(), Path::new("fit.json")).unwrap();
         assert_eq!(back, rtf);
-        push_rtf(format!("rtf-degree{d}-area-ellipses"), &back, rep[0].condition_number);
+        push_rtf(
+            format!("rtf-degree{d}-area-ellipses"),
+            &back,
+            rep[0].condition_number,
+        );
     }
     // The paper's pass/no-pass (minimum-area enclosing ellipses), degree 5.
-    let opts = FitOptions { degree: 5, pass_method: PassMethod::Ellipses, ..Default::default() };
+    let opts = FitOptions {
+        degree: 5,
+        pass_method: PassMethod::Ellipses,
+        ..Default::default()
+    };
     let (rtf, rep) = fit_rtf(&lens, &[550.0], &opts).unwrap();
-    push_rtf("rtf-degree5-enclosing-ellipses".into(), &rtf, rep[0].condition_number);
+    push_rtf(
+        "rtf-degree5-enclosing-ellipses".into(),
+        &rtf,
+        rep[0].condition_number,
+    );
 }
 
 #[test]
@@ -170,7 +204,13 @@ fn optics_fitted_rtfs_match_prescriptions_and_zemax() {
         writeln!(
             csv,
             "{},{},{:.5},{:.5},{:.5},{:.5},{:.3e}",
-            r.lens, r.model, r.ri_err_vs_prescription, r.esf_rmse_vs_prescription, r.ri_err_vs_zemax, r.esf_rmse_vs_zemax, r.cond
+            r.lens,
+            r.model,
+            r.ri_err_vs_prescription,
+            r.esf_rmse_vs_prescription,
+            r.ri_err_vs_zemax,
+            r.esf_rmse_vs_zemax,
+            r.cond
         )
         .unwrap();
     }
@@ -182,14 +222,31 @@ fn optics_fitted_rtfs_match_prescriptions_and_zemax() {
     // polynomial to carry the on-axis aberrations: degrees 3–5 do not reach
     // 1 % for the Tessar (see the table), degrees 6 and 7 do for both lenses.
     for r in rows.iter().filter(|r| r.model.contains("area-ellipses")) {
-        assert!(r.ri_err_vs_prescription <= 0.01, "{} {}: RI error {}", r.lens, r.model, r.ri_err_vs_prescription);
+        assert!(
+            r.ri_err_vs_prescription <= 0.01,
+            "{} {}: RI error {}",
+            r.lens,
+            r.model,
+            r.ri_err_vs_prescription
+        );
         if r.model.contains("degree6") || r.model.contains("degree7") {
-            assert!(r.esf_rmse_vs_prescription <= 0.01, "{} {}: ESF RMSE {}", r.lens, r.model, r.esf_rmse_vs_prescription);
+            assert!(
+                r.esf_rmse_vs_prescription <= 0.01,
+                "{} {}: ESF RMSE {}",
+                r.lens,
+                r.model,
+                r.esf_rmse_vs_prescription
+            );
         }
     }
     // The prescription itself reproduces Zemax's geometric ESF (≤ 1.5 %).
     for r in rows.iter().filter(|r| r.model == "prescription") {
-        assert!(r.esf_rmse_vs_zemax <= 0.015, "{}: ESF vs Zemax {}", r.lens, r.esf_rmse_vs_zemax);
+        assert!(
+            r.esf_rmse_vs_zemax <= 0.015,
+            "{}: ESF vs Zemax {}",
+            r.lens,
+            r.esf_rmse_vs_zemax
+        );
     }
 }
 
@@ -198,18 +255,37 @@ fn optics_fitted_rtfs_match_prescriptions_and_zemax() {
 #[test]
 fn optics_degree16_fit_is_finite() {
     let lens = Prescription::load(Path::new("lenses/prescriptions/tessar-zemax.json")).unwrap();
-    let opts = FitOptions { degree: 16, n_field: 20, n_rho: 7, n_theta: 16, n_ellipses: 11, pass_method: PassMethod::AreaEllipses };
+    let opts = FitOptions {
+        degree: 16,
+        n_field: 20,
+        n_rho: 7,
+        n_theta: 16,
+        n_ellipses: 11,
+        pass_method: PassMethod::AreaEllipses,
+    };
     let (rtf, reports) = fit_rtf(&lens, &[550.0], &opts).unwrap();
     for r in &reports {
         println!(
             "degree 16 {}: terms {}, samples {}, dropped {}, condition {:.3e}, rms {:.3e}, max {:.3e}",
-            r.output, r.n_terms, r.n_samples, r.n_dropped, r.condition_number, r.rms_residual, r.max_residual
+            r.output,
+            r.n_terms,
+            r.n_samples,
+            r.n_dropped,
+            r.condition_number,
+            r.rms_residual,
+            r.max_residual
         );
         assert_eq!(r.n_terms, 969);
         assert!(r.condition_number.is_finite() && r.condition_number >= 1.0);
         assert!(r.rms_residual.is_finite() && r.max_residual.is_finite());
     }
-    assert!(rtf.waves[0].outputs.iter().flatten().all(|p| p.coeff.iter().all(|c| c.is_finite())));
+    assert!(
+        rtf.waves[0]
+            .outputs
+            .iter()
+            .flatten()
+            .all(|p| p.coeff.iter().all(|c| c.is_finite()))
+    );
     let bfd = lens.paraxial(550.0).unwrap().back_focal_distance_mm;
     let cam = RtfCamera::new(rtf, bfd).unwrap();
     let mut n = 0;

@@ -9,9 +9,12 @@
 //! Quadrature: an n×n midpoint grid over the pupil sample square
 //! (deterministic, identical for every thread count).
 
+// `!(x > 0.0)` is used on purpose: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+use super::Camera;
 use super::prescription::{Prescription, PrescriptionCamera};
 use super::rtf::{Rtf, RtfCamera};
-use super::Camera;
 use crate::{Error, Result};
 use glam::DVec2;
 use rayon::prelude::*;
@@ -31,20 +34,41 @@ pub const DEFAULT_WAVELENGTH_NM: f64 = 550.0;
 /// Load a lens file: `.dat` → prescription; JSON with `surfaces` →
 /// prescription; JSON with `polynomials` → RTF.
 pub fn load_lens(path: &Path) -> Result<LensFile> {
-    if path.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("dat")) {
+    if path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("dat"))
+    {
         return Ok(LensFile::Prescription(Prescription::load(path)?));
     }
-    let text = std::fs::read_to_string(path).map_err(|e| Error::Io { path: path.to_path_buf(), message: e.to_string() })?;
+    let text = std::fs::read_to_string(path).map_err(|e| Error::Io {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })?;
     let v: Value = serde_json::from_str(&text).map_err(|e| {
-        let offset = text.lines().take(e.line().saturating_sub(1)).map(|l| l.len() + 1).sum::<usize>() + e.column().saturating_sub(1);
-        Error::from(crate::diag::Located::at_offset(path, &text, offset, 1, format!("invalid JSON: {e}")))
+        let offset = text
+            .lines()
+            .take(e.line().saturating_sub(1))
+            .map(|l| l.len() + 1)
+            .sum::<usize>()
+            + e.column().saturating_sub(1);
+        Error::from(crate::diag::Located::at_offset(
+            path,
+            &text,
+            offset,
+            1,
+            format!("invalid JSON: {e}"),
+        ))
     })?;
     if v.get("polynomials").is_some() {
         Ok(LensFile::Rtf(Rtf::from_value(&v, path)?))
     } else if v.get("surfaces").is_some() {
         Ok(LensFile::Prescription(Prescription::from_value(&v, path)?))
     } else {
-        Err(Error::Invalid(format!("{}: neither a lens prescription ('surfaces') nor an RTF ('polynomials')", path.display())))
+        Err(Error::Invalid(format!(
+            "{}: neither a lens prescription ('surfaces') nor an RTF ('polynomials')",
+            path.display()
+        )))
     }
 }
 
@@ -80,7 +104,12 @@ impl LensCamera {
 /// (measured from the film); prescriptions default to focus at infinity. An
 /// RTF needs a film distance unless its file came from `fit-rtf`, which
 /// records none: then `Error::Invalid` asks for one.
-pub fn lens_camera(lens: LensFile, film_distance_mm: Option<f64>, focus_from_film_m: Option<f64>, wavelength_nm: f64) -> Result<LensCamera> {
+pub fn lens_camera(
+    lens: LensFile,
+    film_distance_mm: Option<f64>,
+    focus_from_film_m: Option<f64>,
+    wavelength_nm: f64,
+) -> Result<LensCamera> {
     match lens {
         LensFile::Prescription(p) => {
             let d = match (film_distance_mm, focus_from_film_m) {
@@ -88,7 +117,11 @@ pub fn lens_camera(lens: LensFile, film_distance_mm: Option<f64>, focus_from_fil
                 (None, Some(z)) => p.film_distance_for_focus_mm(z * 1e3, wavelength_nm)?,
                 (None, None) => p.film_distance_for_focus_mm(f64::INFINITY, wavelength_nm)?,
             };
-            Ok(LensCamera::Prescription(PrescriptionCamera::new(p, d, wavelength_nm)?))
+            Ok(LensCamera::Prescription(PrescriptionCamera::new(
+                p,
+                d,
+                wavelength_nm,
+            )?))
         }
         LensFile::Rtf(r) => {
             let d = match (film_distance_mm, focus_from_film_m) {
@@ -107,9 +140,27 @@ pub fn lens_camera(lens: LensFile, film_distance_mm: Option<f64>, focus_from_fil
 }
 
 /// Load a lens file and build its camera for the renderer
-/// (scene `CameraModel::LensFile`): distances in metres.
-pub fn load_lens_camera(path: &Path, film_distance_m: Option<f64>, focus_distance_m: Option<f64>) -> Result<Box<dyn Camera>> {
-    let cam = lens_camera(load_lens(path)?, film_distance_m.map(|d| d * 1e3), focus_distance_m, DEFAULT_WAVELENGTH_NM)?;
+/// (scene `CameraModel::LensFile`): distances in metres; the focus distance
+/// is measured from the film (camera origin). Stopping a lens file down
+/// (`aperture_diameter_m`) is not supported.
+pub fn load_lens_camera(
+    path: &Path,
+    film_distance_m: Option<f64>,
+    focus_distance_m: Option<f64>,
+    aperture_diameter_m: Option<f64>,
+) -> Result<Box<dyn Camera>> {
+    if aperture_diameter_m.is_some() {
+        return Err(Error::NotSupported(format!(
+            "{}: changing the aperture of a lens file",
+            path.display()
+        )));
+    }
+    let cam = lens_camera(
+        load_lens(path)?,
+        film_distance_m.map(|d| d * 1e3),
+        focus_distance_m,
+        DEFAULT_WAVELENGTH_NM,
+    )?;
     Ok(match cam {
         LensCamera::Prescription(c) => Box::new(c),
         LensCamera::Rtf(c) => Box::new(c),
@@ -121,7 +172,9 @@ pub fn load_lens_camera(path: &Path, film_distance_m: Option<f64>, focus_distanc
 /// (golden-section search over the film distance).
 pub fn rtf_infinity_film_distance_mm(rtf: &Rtf, wavelength_nm: f64) -> Result<f64> {
     let spread = |d: f64| -> f64 {
-        let Ok(cam) = RtfCamera::new(rtf.clone(), d) else { return f64::INFINITY };
+        let Ok(cam) = RtfCamera::new(rtf.clone(), d) else {
+            return f64::INFINITY;
+        };
         let n = 24;
         let mut s = 0.0;
         let mut k = 0;
@@ -136,7 +189,10 @@ pub fn rtf_infinity_film_distance_mm(rtf: &Rtf, wavelength_nm: f64) -> Result<f6
         }
         if k == 0 { f64::INFINITY } else { s / k as f64 }
     };
-    let (mut a, mut b) = (rtf.plane_offset_input_mm * 0.2 + 1e-6, rtf.plane_offset_input_mm * 3.0 + 1.0);
+    let (mut a, mut b) = (
+        rtf.plane_offset_input_mm * 0.2 + 1e-6,
+        rtf.plane_offset_input_mm * 3.0 + 1.0,
+    );
     let g = 0.5 * (5f64.sqrt() - 1.0);
     for _ in 0..80 {
         let c = b - g * (b - a);
@@ -145,7 +201,10 @@ pub fn rtf_infinity_film_distance_mm(rtf: &Rtf, wavelength_nm: f64) -> Result<f6
     }
     let d = 0.5 * (a + b);
     if !spread(d).is_finite() {
-        return Err(Error::Invalid(format!("RTF '{}': no film distance lets on-axis rays through", rtf.name)));
+        return Err(Error::Invalid(format!(
+            "RTF '{}': no film distance lets on-axis rays through",
+            rtf.name
+        )));
     }
     Ok(d)
 }
@@ -166,12 +225,20 @@ pub fn irradiance_factor(cam: &dyn Camera, film_m: DVec2, wavelength_nm: f64, n:
 
 /// Relative illumination of a uniform Lambertian field at infinity (every
 /// ray sees the same radiance) at film heights along +y, normalised on axis.
-pub fn relative_illumination(cam: &dyn Camera, field_heights_mm: &[f64], wavelength_nm: f64, n: usize) -> Result<Vec<f64>> {
+pub fn relative_illumination(
+    cam: &dyn Camera,
+    field_heights_mm: &[f64],
+    wavelength_nm: f64,
+    n: usize,
+) -> Result<Vec<f64>> {
     let e0 = irradiance_factor(cam, DVec2::ZERO, wavelength_nm, n);
     if !(e0 > 0.0) {
         return Err(Error::Invalid("no light reaches the film on axis".into()));
     }
-    Ok(field_heights_mm.par_iter().map(|&h| irradiance_factor(cam, DVec2::new(0.0, h * 1e-3), wavelength_nm, n) / e0).collect())
+    Ok(field_heights_mm
+        .par_iter()
+        .map(|&h| irradiance_factor(cam, DVec2::new(0.0, h * 1e-3), wavelength_nm, n) / e0)
+        .collect())
 }
 
 /// Geometric ESF/LSF of a straight edge (parallel to y) in the plane
@@ -181,19 +248,26 @@ pub fn relative_illumination(cam: &dyn Camera, field_heights_mm: &[f64], wavelen
 /// ESF(x) = fraction of the light reaching film point x that comes from the
 /// bright side; LSF = dESF/dx by central differences, normalised to peak 1.
 /// Returns (esf, lsf) per position (µm).
-pub fn edge_spread(cam: &dyn Camera, object_z_mm: f64, field_mm: f64, positions_um: &[f64], wavelength_nm: f64, n: usize) -> Result<Vec<(f64, f64)>> {
+pub fn edge_spread(
+    cam: &dyn Camera,
+    object_z_mm: f64,
+    field_mm: f64,
+    positions_um: &[f64],
+    wavelength_nm: f64,
+    n: usize,
+) -> Result<Vec<(f64, f64)>> {
     let z_obj = object_z_mm * 1e-3;
     let hits = |x_mm: f64| -> Vec<(f64, f64)> {
         let mut v = Vec::with_capacity(n * n);
         for i in 0..n {
             for j in 0..n {
                 let u = DVec2::new((i as f64 + 0.5) / n as f64, (j as f64 + 0.5) / n as f64);
-                if let Some(r) = cam.sample_ray(DVec2::new(x_mm * 1e-3, 0.0), u, wavelength_nm) {
-                    if r.direction.z > 0.0 {
-                        let t = (z_obj - r.origin.z) / r.direction.z;
-                        if t > 0.0 {
-                            v.push((r.origin.x + r.direction.x * t, r.weight));
-                        }
+                if let Some(r) = cam.sample_ray(DVec2::new(x_mm * 1e-3, 0.0), u, wavelength_nm)
+                    && r.direction.z > 0.0
+                {
+                    let t = (z_obj - r.origin.z) / r.direction.z;
+                    if t > 0.0 {
+                        v.push((r.origin.x + r.direction.x * t, r.weight));
                     }
                 }
             }
@@ -203,7 +277,9 @@ pub fn edge_spread(cam: &dyn Camera, object_z_mm: f64, field_mm: f64, positions_
     let h0 = hits(field_mm);
     let wsum: f64 = h0.iter().map(|h| h.1).sum();
     if !(wsum > 0.0) {
-        return Err(Error::Invalid(format!("no light reaches film height {field_mm} mm")));
+        return Err(Error::Invalid(format!(
+            "no light reaches film height {field_mm} mm"
+        )));
     }
     let x_edge = h0.iter().map(|h| h.0 * h.1).sum::<f64>() / wsum;
     let esf: Vec<f64> = positions_um
@@ -216,13 +292,16 @@ pub fn edge_spread(cam: &dyn Camera, object_z_mm: f64, field_mm: f64, positions_
         })
         .collect();
     let m = esf.len();
-    let mut lsf = vec![0.0; m];
-    for k in 0..m {
-        let (a, b) = (k.saturating_sub(1), (k + 1).min(m - 1));
-        if b > a {
-            lsf[k] = (esf[b] - esf[a]) / (positions_um[b] - positions_um[a]);
-        }
-    }
+    let mut lsf: Vec<f64> = (0..m)
+        .map(|k| {
+            let (a, b) = (k.saturating_sub(1), (k + 1).min(m - 1));
+            if b > a {
+                (esf[b] - esf[a]) / (positions_um[b] - positions_um[a])
+            } else {
+                0.0
+            }
+        })
+        .collect();
     let peak = lsf.iter().cloned().fold(0.0, f64::max);
     if peak > 0.0 {
         lsf.iter_mut().for_each(|v| *v /= peak);
@@ -232,7 +311,12 @@ pub fn edge_spread(cam: &dyn Camera, object_z_mm: f64, field_mm: f64, positions_
 
 /// Half-width (µm) of the film region an object point at `object_z_mm`
 /// spreads over around film height `field_mm` (for choosing ESF positions).
-pub fn blur_half_width_um(cam: &dyn Camera, object_z_mm: f64, field_mm: f64, wavelength_nm: f64) -> f64 {
+pub fn blur_half_width_um(
+    cam: &dyn Camera,
+    object_z_mm: f64,
+    field_mm: f64,
+    wavelength_nm: f64,
+) -> f64 {
     let z_obj = object_z_mm * 1e-3;
     let spot = |x_mm: f64| -> Option<(f64, f64)> {
         let n = 32;

@@ -31,6 +31,9 @@
 //! algorithm and scaled to contain every point. Radii beyond the last
 //! radius that passes any light get no ellipse (the RTF camera blocks them).
 
+// `!(x > 0.0)` is used on purpose: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use super::prescription::Prescription;
 use super::rtf::{Ellipses, PassNoPass, Poly, Rtf, RtfWave};
 use crate::{Error, Result};
@@ -65,7 +68,14 @@ pub enum PassMethod {
 
 impl Default for FitOptions {
     fn default() -> Self {
-        Self { degree: 5, n_field: 24, n_rho: 8, n_theta: 24, n_ellipses: 25, pass_method: PassMethod::Ellipses }
+        Self {
+            degree: 5,
+            n_field: 24,
+            n_rho: 8,
+            n_theta: 24,
+            n_ellipses: 25,
+            pass_method: PassMethod::Ellipses,
+        }
     }
 }
 
@@ -97,9 +107,16 @@ pub fn lstsq_qr(mut cols: Vec<Vec<f64>>, mut rhs: Vec<Vec<f64>>) -> Result<Lstsq
     let n = cols.len();
     let m = cols.first().map_or(0, |c| c.len());
     if m < n || n == 0 {
-        return Err(Error::Invalid(format!("least squares: {m} samples for {n} unknowns")));
+        return Err(Error::Invalid(format!(
+            "least squares: {m} samples for {n} unknowns"
+        )));
     }
-    if cols.iter().flatten().chain(rhs.iter().flatten()).any(|v| !v.is_finite()) {
+    if cols
+        .iter()
+        .flatten()
+        .chain(rhs.iter().flatten())
+        .any(|v| !v.is_finite())
+    {
         return Err(Error::Invalid("least squares: non-finite input".into()));
     }
     let mut perm: Vec<usize> = (0..n).collect();
@@ -107,8 +124,14 @@ pub fn lstsq_qr(mut cols: Vec<Vec<f64>>, mut rhs: Vec<Vec<f64>>) -> Result<Lstsq
     let mut r00 = 0.0;
     for k in 0..n {
         // Pivot on the largest remaining column norm.
-        let norms: Vec<f64> = (k..n).map(|j| cols[j][k..].iter().map(|v| v * v).sum::<f64>()).collect();
-        let (pj, &pn) = norms.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).unwrap();
+        let norms: Vec<f64> = (k..n)
+            .map(|j| cols[j][k..].iter().map(|v| v * v).sum::<f64>())
+            .collect();
+        let (pj, &pn) = norms
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(b.1))
+            .unwrap();
         let p = k + pj;
         cols.swap(k, p);
         perm.swap(k, p);
@@ -173,8 +196,16 @@ pub fn lstsq_qr(mut cols: Vec<Vec<f64>>, mut rhs: Vec<Vec<f64>>) -> Result<Lstsq
         .collect();
     // Condition number of the kept block: σ_max by power iteration on RᵀR,
     // σ_min by inverse iteration (two triangular solves per step).
-    let mul_r = |v: &[f64]| (0..rank).map(|i| (i..rank).map(|j| rr(i, j) * v[j]).sum::<f64>()).collect::<Vec<_>>();
-    let mul_rt = |v: &[f64]| (0..rank).map(|i| (0..=i).map(|j| rr(j, i) * v[j]).sum::<f64>()).collect::<Vec<_>>();
+    let mul_r = |v: &[f64]| {
+        (0..rank)
+            .map(|i| (i..rank).map(|j| rr(i, j) * v[j]).sum::<f64>())
+            .collect::<Vec<_>>()
+    };
+    let mul_rt = |v: &[f64]| {
+        (0..rank)
+            .map(|i| (0..=i).map(|j| rr(j, i) * v[j]).sum::<f64>())
+            .collect::<Vec<_>>()
+    };
     let unit = |v: Vec<f64>| {
         let n = v.iter().map(|x| x * x).sum::<f64>().sqrt();
         (v.iter().map(|x| x / n).collect::<Vec<_>>(), n)
@@ -195,7 +226,11 @@ pub fn lstsq_qr(mut cols: Vec<Vec<f64>>, mut rhs: Vec<Vec<f64>>) -> Result<Lstsq
         inv2 = n;
     }
     let cond = (smax2 * inv2).sqrt();
-    Ok(LstsqSolution { x, rank, condition_number: if cond.is_finite() { cond } else { f64::MAX } })
+    Ok(LstsqSolution {
+        x,
+        rank,
+        condition_number: if cond.is_finite() { cond } else { f64::MAX },
+    })
 }
 
 /// Minimum-area enclosing ellipse (Khachiyan). Returns (centre, A) with
@@ -241,7 +276,10 @@ pub fn min_area_ellipse(points: &[DVec2], tol: f64) -> Option<(DVec2, [[f64; 2];
             break;
         }
     }
-    let c = points.iter().zip(&u).fold(DVec2::ZERO, |a, (p, &w)| a + *p * w);
+    let c = points
+        .iter()
+        .zip(&u)
+        .fold(DVec2::ZERO, |a, (p, &w)| a + *p * w);
     let mut s = [[0.0; 2]; 2];
     for (p, &w) in points.iter().zip(&u) {
         let d = *p - c;
@@ -255,7 +293,10 @@ pub fn min_area_ellipse(points: &[DVec2], tol: f64) -> Option<(DVec2, [[f64; 2];
         return None;
     }
     // A = (1/d)·S⁻¹ with d = 2.
-    let mut a = [[s[1][1] / det / 2.0, -s[0][1] / det / 2.0], [-s[1][0] / det / 2.0, s[0][0] / det / 2.0]];
+    let mut a = [
+        [s[1][1] / det / 2.0, -s[0][1] / det / 2.0],
+        [-s[1][0] / det / 2.0, s[0][0] / det / 2.0],
+    ];
     let q = |p: &DVec2| {
         let d = *p - c;
         a[0][0] * d.x * d.x + 2.0 * a[0][1] * d.x * d.y + a[1][1] * d.y * d.y
@@ -272,7 +313,8 @@ pub fn min_area_ellipse(points: &[DVec2], tol: f64) -> Option<(DVec2, [[f64; 2];
 }
 
 fn inv3(m: &[[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
-    let c = |r0: usize, r1: usize, c0: usize, c1: usize| m[r0][c0] * m[r1][c1] - m[r0][c1] * m[r1][c0];
+    let c =
+        |r0: usize, r1: usize, c0: usize, c1: usize| m[r0][c0] * m[r1][c1] - m[r0][c1] * m[r1][c0];
     let cof = [
         [c(1, 2, 1, 2), -c(1, 2, 0, 2), c(1, 2, 0, 1)],
         [-c(0, 2, 1, 2), c(0, 2, 0, 2), -c(0, 2, 0, 1)],
@@ -301,14 +343,21 @@ pub fn area_matched_ellipse(pts: &[DVec2]) -> Option<(DVec2, [f64; 2])> {
     if n < 3 {
         return None;
     }
-    let area = 0.5 * (0..n).map(|i| poly[i].perp_dot(poly[(i + 1) % n])).sum::<f64>().abs();
+    let area = 0.5
+        * (0..n)
+            .map(|i| poly[i].perp_dot(poly[(i + 1) % n]))
+            .sum::<f64>()
+            .abs();
     let ymin = pts.iter().map(|p| p.y).fold(f64::INFINITY, f64::min);
     let ymax = pts.iter().map(|p| p.y).fold(f64::NEG_INFINITY, f64::max);
     let ry = 0.5 * (ymax - ymin);
     if !(ry > 0.0 && area > 0.0) {
         return None;
     }
-    Some((DVec2::new(0.0, 0.5 * (ymin + ymax)), [area / (std::f64::consts::PI * ry), ry]))
+    Some((
+        DVec2::new(0.0, 0.5 * (ymin + ymax)),
+        [area / (std::f64::consts::PI * ry), ry],
+    ))
 }
 
 /// Monomial exponents of total degree ≤ N, ordered by degree.
@@ -355,30 +404,57 @@ impl BlackBox<'_> {
 
 /// Sag of surface `s` at its rim towards +z (scene) and −z (film), mm.
 fn rim_sag(radius: f64, semi: f64) -> f64 {
-    if radius == 0.0 { 0.0 } else { radius.abs() - (radius * radius - semi * semi).max(0.0).sqrt() }
+    if radius == 0.0 {
+        0.0
+    } else {
+        radius.abs() - (radius * radius - semi * semi).max(0.0).sqrt()
+    }
 }
 
 /// Fit an RTF to `lens` at each wavelength; returns the RTF and per-output reports.
-pub fn fit_rtf(lens: &Prescription, wavelengths_nm: &[f64], opts: &FitOptions) -> Result<(Rtf, Vec<FitReport>)> {
-    fit_rtf_degrees(lens, wavelengths_nm, &[opts.degree], opts)?.pop().ok_or_else(|| Error::Invalid("no fit".into()))
+pub fn fit_rtf(
+    lens: &Prescription,
+    wavelengths_nm: &[f64],
+    opts: &FitOptions,
+) -> Result<(Rtf, Vec<FitReport>)> {
+    fit_rtf_degrees(lens, wavelengths_nm, &[opts.degree], opts)?
+        .pop()
+        .ok_or_else(|| Error::Invalid("no fit".into()))
 }
 
 /// Fit RTFs of several degrees from one set of traced data (`opts.degree`
 /// is ignored); one (RTF, reports) per degree, in order.
-pub fn fit_rtf_degrees(lens: &Prescription, wavelengths_nm: &[f64], degrees: &[usize], opts: &FitOptions) -> Result<Vec<(Rtf, Vec<FitReport>)>> {
+pub fn fit_rtf_degrees(
+    lens: &Prescription,
+    wavelengths_nm: &[f64],
+    degrees: &[usize],
+    opts: &FitOptions,
+) -> Result<Vec<(Rtf, Vec<FitReport>)>> {
     if let Some(d) = degrees.iter().find(|&&d| d > 24) {
-        return Err(Error::Invalid(format!("RTF degree {d} is above the supported 24")));
+        return Err(Error::Invalid(format!(
+            "RTF degree {d} is above the supported 24"
+        )));
     }
     if wavelengths_nm.is_empty() || wavelengths_nm.iter().any(|w| !(w.is_finite() && *w > 0.0)) {
-        return Err(Error::Invalid("fit-rtf: wavelengths must be positive numbers (nm)".into()));
+        return Err(Error::Invalid(
+            "fit-rtf: wavelengths must be positive numbers (nm)".into(),
+        ));
     }
     let px = lens.paraxial(wavelengths_nm[0])?;
     let f = px.effective_focal_length_mm.abs();
     let first = &lens.surfaces[0];
     let last = lens.surfaces.last().unwrap();
     // Rear surface bulging towards the film: radius > 0 (centre on the film side).
-    let rear_sag = if last.radius_mm > 0.0 { rim_sag(last.radius_mm, last.semi_aperture_mm) } else { 0.0 };
-    let front_sag = if first.radius_mm < 0.0 { rim_sag(first.radius_mm, first.semi_aperture_mm) } else { 0.0 };
+    let rear_sag = if last.radius_mm > 0.0 {
+        rim_sag(last.radius_mm, last.semi_aperture_mm)
+    } else {
+        0.0
+    };
+    let front_sag = if first.radius_mm < 0.0 {
+        rim_sag(first.radius_mm, first.semi_aperture_mm)
+    } else {
+        0.0
+    };
     // Input plane just in front of the infinity-focus film plane (as in the
     // Pixel 4a file): each input point then is (nearly) a film point, and the
     // pass region is that film point's vignetted pupil, which an ellipse fits
@@ -386,7 +462,8 @@ pub fn fit_rtf_degrees(lens: &Prescription, wavelengths_nm: &[f64], degrees: &[u
     let offset_in = (0.98 * px.back_focal_distance_mm).max(rear_sag + 0.01 * f);
     let offset_out = front_sag + 0.01 * f;
     let track = lens.total_track_mm();
-    let mut per_degree: Vec<(Vec<RtfWave>, Vec<FitReport>)> = degrees.iter().map(|_| (Vec::new(), Vec::new())).collect();
+    let mut per_degree: Vec<(Vec<RtfWave>, Vec<FitReport>)> =
+        degrees.iter().map(|_| (Vec::new(), Vec::new())).collect();
     for &wl in wavelengths_nm {
         let pxw = lens.paraxial(wl)?;
         let xp = -pxw.exit_pupil_from_rear_mm; // lens-frame z of the exit pupil
@@ -394,7 +471,13 @@ pub fn fit_rtf_degrees(lens: &Prescription, wavelengths_nm: &[f64], degrees: &[u
         if !(pass_distance > 0.05 * f) {
             pass_distance = offset_in;
         }
-        let bb = BlackBox { lens, wavelength_nm: wl, z_in: -offset_in, z_out: track + offset_out, pass_distance };
+        let bb = BlackBox {
+            lens,
+            wavelength_nm: wl,
+            z_in: -offset_in,
+            z_out: track + offset_out,
+            pass_distance,
+        };
         // The pass region lies near the exit pupil on the pass plane: search a
         // square of half-width 3·(exit pupil radius) around the axis.
         let half = 3.0 * pxw.exit_pupil_radius_mm.max(1e-6);
@@ -402,7 +485,10 @@ pub fn fit_rtf_degrees(lens: &Prescription, wavelengths_nm: &[f64], degrees: &[u
             let (mut c, mut k) = (DVec2::ZERO, 0);
             for i in 0..ng {
                 for j in 0..ng {
-                    let q = DVec2::new(-half + 2.0 * half * (i as f64 + 0.5) / ng as f64, -half + 2.0 * half * (j as f64 + 0.5) / ng as f64);
+                    let q = DVec2::new(
+                        -half + 2.0 * half * (i as f64 + 0.5) / ng as f64,
+                        -half + 2.0 * half * (j as f64 + 0.5) / ng as f64,
+                    );
                     if bb.passes(r, q) {
                         c += q;
                         k += 1;
@@ -428,7 +514,11 @@ pub fn fit_rtf_degrees(lens: &Prescription, wavelengths_nm: &[f64], degrees: &[u
         let (mut lo, mut hi) = (r_pass, r_pass + step);
         for _ in 0..16 {
             let mid = 0.5 * (lo + hi);
-            if grid_pass(mid, 48).is_some() { lo = mid } else { hi = mid }
+            if grid_pass(mid, 48).is_some() {
+                lo = mid
+            } else {
+                hi = mid
+            }
         }
         let r_end = lo;
         let region = |r: f64| -> Option<(DVec2, f64)> { grid_pass(r, 48).map(|c| (c, half)) };
@@ -447,7 +537,11 @@ pub fn fit_rtf_degrees(lens: &Prescription, wavelengths_nm: &[f64], degrees: &[u
                 let (mut lo, mut hi) = (0.0, 4.0 * half);
                 for _ in 0..30 {
                     let mid = 0.5 * (lo + hi);
-                    if bb.passes(r, c + dir * mid) { lo = mid } else { hi = mid }
+                    if bb.passes(r, c + dir * mid) {
+                        lo = mid
+                    } else {
+                        hi = mid
+                    }
                 }
                 let p = c + dir * lo;
                 pts.push(p);
@@ -456,11 +550,16 @@ pub fn fit_rtf_degrees(lens: &Prescription, wavelengths_nm: &[f64], degrees: &[u
             Some(pts)
         };
         // Boundaries of the pass region per field radius.
-        let radii: Vec<f64> = (0..opts.n_ellipses).map(|k| r_end * k as f64 / (opts.n_ellipses - 1) as f64).collect();
+        let radii: Vec<f64> = (0..opts.n_ellipses)
+            .map(|k| r_end * k as f64 / (opts.n_ellipses - 1) as f64)
+            .collect();
         let bounds: Vec<Option<Vec<DVec2>>> = radii.par_iter().map(|&r| boundary(r)).collect();
         let n_ok = bounds.iter().take_while(|e| e.is_some()).count();
         if n_ok < 4 {
-            return Err(Error::Invalid(format!("lens '{}': fewer than four field radii pass light", lens.name)));
+            return Err(Error::Invalid(format!(
+                "lens '{}': fewer than four field radii pass light",
+                lens.name
+            )));
         }
         let bounds: Vec<Vec<DVec2>> = bounds.into_iter().take(n_ok).map(|b| b.unwrap()).collect();
         let radii = &radii[..n_ok];
@@ -477,7 +576,9 @@ pub fn fit_rtf_degrees(lens: &Prescription, wavelengths_nm: &[f64], degrees: &[u
                     Some((c, [(a[1][1] / det).sqrt(), (a[0][0] / det).sqrt()]))
                 })
                 .collect::<Option<Vec<_>>>()
-                .ok_or_else(|| Error::Invalid(format!("lens '{}': degenerate pass region", lens.name)))?;
+                .ok_or_else(|| {
+                    Error::Invalid(format!("lens '{}': degenerate pass region", lens.name))
+                })?;
             Ok(PassNoPass::Ellipses(Ellipses {
                 positions_mm: radii.to_vec(),
                 radii_x_mm: ell.iter().map(|e| e.1[0]).collect(),
@@ -490,18 +591,28 @@ pub fn fit_rtf_degrees(lens: &Prescription, wavelengths_nm: &[f64], degrees: &[u
         let pass = ellipses()?;
         let r_last = radii[n_ok - 1];
         // Polynomial data: polar grid inside each field's ellipse.
-        let fields: Vec<f64> = (0..opts.n_field).map(|k| r_last * k as f64 / (opts.n_field - 1) as f64).collect();
+        let fields: Vec<f64> = (0..opts.n_field)
+            .map(|k| r_last * k as f64 / (opts.n_field - 1) as f64)
+            .collect();
         let data: Vec<([f64; 3], [f64; 5])> = fields
             .par_iter()
             .flat_map_iter(|&r| {
                 let [x0, x1, y0, y1] = pass.bbox(r).unwrap_or([0.0; 4]);
-                let (cx, cy, rx, ry) = (0.5 * (x0 + x1), 0.5 * (y0 + y1), 0.5 * (x1 - x0), 0.5 * (y1 - y0));
+                let (cx, cy, rx, ry) = (
+                    0.5 * (x0 + x1),
+                    0.5 * (y0 + y1),
+                    0.5 * (x1 - x0),
+                    0.5 * (y1 - y0),
+                );
                 let mut v = Vec::new();
                 for i in 0..opts.n_rho {
                     let rho = ((i as f64 + 0.5) / opts.n_rho as f64).sqrt();
                     for j in 0..opts.n_theta {
-                        let th = std::f64::consts::TAU * (j as f64 + 0.25 * (i % 4) as f64) / opts.n_theta as f64;
-                        if let Some(s) = bb.trace(r, cx + rho * rx * th.cos(), cy + rho * ry * th.sin()) {
+                        let th = std::f64::consts::TAU * (j as f64 + 0.25 * (i % 4) as f64)
+                            / opts.n_theta as f64;
+                        if let Some(s) =
+                            bb.trace(r, cx + rho * rx * th.cos(), cy + rho * ry * th.sin())
+                        {
                             v.push(s);
                         }
                     }
@@ -510,67 +621,101 @@ pub fn fit_rtf_degrees(lens: &Prescription, wavelengths_nm: &[f64], degrees: &[u
             })
             .collect();
         for (di, &degree) in degrees.iter().enumerate() {
-        let (waves, reports) = &mut per_degree[di];
-        let terms = monomials(degree);
-        if data.len() < 2 * terms.len() {
-            return Err(Error::Invalid(format!(
-                "lens '{}': {} traced samples for {} monomials; use more samples or a lower degree",
-                lens.name,
-                data.len(),
-                terms.len()
-            )));
-        }
-        let r_s = r_last.max(1e-9);
-        let d_s = data.iter().map(|s| s.0[1].abs().max(s.0[2].abs())).fold(1e-12, f64::max);
-        let deg = degree + 1;
-        let pows = |v: f64| {
-            let mut p = vec![1.0; deg];
-            for i in 1..deg {
-                p[i] = p[i - 1] * v;
+            let (waves, reports) = &mut per_degree[di];
+            let terms = monomials(degree);
+            if data.len() < 2 * terms.len() {
+                return Err(Error::Invalid(format!(
+                    "lens '{}': {} traced samples for {} monomials; use more samples or a lower degree",
+                    lens.name,
+                    data.len(),
+                    terms.len()
+                )));
             }
-            p
-        };
-        let rows: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)> = data.iter().map(|s| (pows(s.0[0] / r_s), pows(s.0[1] / d_s), pows(s.0[2] / d_s))).collect();
-        let mut cols: Vec<Vec<f64>> = terms
-            .iter()
-            .map(|t| rows.iter().map(|(a, b, c)| a[t[0] as usize] * b[t[1] as usize] * c[t[2] as usize]).collect())
-            .collect();
-        let col_norm: Vec<f64> = cols.iter().map(|c| c.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-300)).collect();
-        for (c, n) in cols.iter_mut().zip(&col_norm) {
-            c.iter_mut().for_each(|v| *v /= n);
-        }
-        let rhs: Vec<Vec<f64>> = (0..5).map(|k| data.iter().map(|s| s.1[k]).collect()).collect();
-        let sol = lstsq_qr(cols, rhs)?;
-        let names = ["outx", "outy", "outdx", "outdy", "outdz"];
-        let slots = [0usize, 1, 3, 4, 5];
-        let mut outputs: [Option<Poly>; 6] = Default::default();
-        for (k, x) in sol.x.iter().enumerate() {
-            let coeff: Vec<f64> = terms
+            let r_s = r_last.max(1e-9);
+            let d_s = data
                 .iter()
-                .zip(x)
-                .zip(&col_norm)
-                .map(|((t, c), n)| c / n / (r_s.powi(t[0] as i32) * d_s.powi((t[1] + t[2]) as i32)))
+                .map(|s| s.0[1].abs().max(s.0[2].abs()))
+                .fold(1e-12, f64::max);
+            let deg = degree + 1;
+            let pows = |v: f64| {
+                let mut p = vec![1.0; deg];
+                for i in 1..deg {
+                    p[i] = p[i - 1] * v;
+                }
+                p
+            };
+            let rows: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)> = data
+                .iter()
+                .map(|s| (pows(s.0[0] / r_s), pows(s.0[1] / d_s), pows(s.0[2] / d_s)))
                 .collect();
-            let poly = Poly { terms: terms.clone(), coeff };
-            let res: Vec<f64> = data.iter().map(|s| poly.eval(s.0[0], s.0[1], s.0[2]) - s.1[k]).collect();
-            if res.iter().any(|v| !v.is_finite()) {
-                return Err(Error::Invalid(format!("lens '{}': degree-{} fit of {} is not finite", lens.name, degree, names[k])));
+            let mut cols: Vec<Vec<f64>> = terms
+                .iter()
+                .map(|t| {
+                    rows.iter()
+                        .map(|(a, b, c)| a[t[0] as usize] * b[t[1] as usize] * c[t[2] as usize])
+                        .collect()
+                })
+                .collect();
+            let col_norm: Vec<f64> = cols
+                .iter()
+                .map(|c| c.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-300))
+                .collect();
+            for (c, n) in cols.iter_mut().zip(&col_norm) {
+                c.iter_mut().for_each(|v| *v /= n);
             }
-            reports.push(FitReport {
-                wavelength_nm: wl,
-                output: names[k].to_string(),
-                degree: degree,
-                n_terms: terms.len(),
-                n_samples: data.len(),
-                n_dropped: terms.len() - sol.rank,
-                condition_number: sol.condition_number,
-                rms_residual: (res.iter().map(|v| v * v).sum::<f64>() / res.len() as f64).sqrt(),
-                max_residual: res.iter().map(|v| v.abs()).fold(0.0, f64::max),
+            let rhs: Vec<Vec<f64>> = (0..5)
+                .map(|k| data.iter().map(|s| s.1[k]).collect())
+                .collect();
+            let sol = lstsq_qr(cols, rhs)?;
+            let names = ["outx", "outy", "outdx", "outdy", "outdz"];
+            let slots = [0usize, 1, 3, 4, 5];
+            let mut outputs: [Option<Poly>; 6] = Default::default();
+            for (k, x) in sol.x.iter().enumerate() {
+                let coeff: Vec<f64> = terms
+                    .iter()
+                    .zip(x)
+                    .zip(&col_norm)
+                    .map(|((t, c), n)| {
+                        c / n / (r_s.powi(t[0] as i32) * d_s.powi((t[1] + t[2]) as i32))
+                    })
+                    .collect();
+                let poly = Poly {
+                    terms: terms.clone(),
+                    coeff,
+                };
+                let res: Vec<f64> = data
+                    .iter()
+                    .map(|s| poly.eval(s.0[0], s.0[1], s.0[2]) - s.1[k])
+                    .collect();
+                if res.iter().any(|v| !v.is_finite()) {
+                    return Err(Error::Invalid(format!(
+                        "lens '{}': degree-{} fit of {} is not finite",
+                        lens.name, degree, names[k]
+                    )));
+                }
+                reports.push(FitReport {
+                    wavelength_nm: wl,
+                    output: names[k].to_string(),
+                    degree,
+                    n_terms: terms.len(),
+                    n_samples: data.len(),
+                    n_dropped: terms.len() - sol.rank,
+                    condition_number: sol.condition_number,
+                    rms_residual: (res.iter().map(|v| v * v).sum::<f64>() / res.len() as f64)
+                        .sqrt(),
+                    max_residual: res.iter().map(|v| v.abs()).fold(0.0, f64::max),
+                });
+                outputs[slots[k]] = Some(poly);
+            }
+            outputs[2] = Some(Poly {
+                terms: vec![[0, 0, 0]],
+                coeff: vec![offset_in + track + offset_out],
             });
-            outputs[slots[k]] = Some(poly);
-        }
-        outputs[2] = Some(Poly { terms: vec![[0, 0, 0]], coeff: vec![offset_in + track + offset_out] });
-        waves.push(RtfWave { wavelength_nm: wl, outputs, pass: pass.clone() });
+            waves.push(RtfWave {
+                wavelength_nm: wl,
+                outputs,
+                pass: pass.clone(),
+            });
         }
     }
     Ok(degrees
@@ -579,7 +724,10 @@ pub fn fit_rtf_degrees(lens: &Prescription, wavelengths_nm: &[f64], degrees: &[u
         .map(|(degree, (waves, reports))| {
             let rtf = Rtf {
                 name: format!("{}-rtf-degree{degree}", lens.name),
-                description: format!("RTF fitted by camsim to prescription '{}', degree {degree}", lens.name),
+                description: format!(
+                    "RTF fitted by camsim to prescription '{}', degree {degree}",
+                    lens.name
+                ),
                 thickness_mm: track,
                 plane_offset_input_mm: offset_in,
                 plane_offset_output_mm: offset_out,
@@ -601,13 +749,29 @@ mod tests {
         let m = 50;
         let c0: Vec<f64> = (0..m).map(|i| if i == 0 { 1.0 } else { 0.0 }).collect();
         let c1: Vec<f64> = (0..m).map(|i| if i == 1 { 1e-3 } else { 0.0 }).collect();
-        let b: Vec<f64> = (0..m).map(|i| if i == 0 { 2.0 } else if i == 1 { 3e-3 } else { 0.0 }).collect();
+        let b: Vec<f64> = (0..m)
+            .map(|i| {
+                if i == 0 {
+                    2.0
+                } else if i == 1 {
+                    3e-3
+                } else {
+                    0.0
+                }
+            })
+            .collect();
         let s = lstsq_qr(vec![c0, c1], vec![b]).unwrap();
         assert!((s.x[0][0] - 2.0).abs() < 1e-12 && (s.x[0][1] - 3.0).abs() < 1e-9);
-        assert!((s.condition_number / 1e3 - 1.0).abs() < 1e-6, "{}", s.condition_number);
+        assert!(
+            (s.condition_number / 1e3 - 1.0).abs() < 1e-6,
+            "{}",
+            s.condition_number
+        );
         // A cubic fitted through noiseless samples.
         let xs: Vec<f64> = (0..40).map(|i| -1.0 + 2.0 * i as f64 / 39.0).collect();
-        let cols: Vec<Vec<f64>> = (0..4).map(|p| xs.iter().map(|x| x.powi(p)).collect()).collect();
+        let cols: Vec<Vec<f64>> = (0..4)
+            .map(|p| xs.iter().map(|x| x.powi(p)).collect())
+            .collect();
         let y: Vec<f64> = xs.iter().map(|x| 1.0 - 2.0 * x + 0.5 * x * x * x).collect();
         let s = lstsq_qr(cols, vec![y]).unwrap();
         for (got, want) in s.x[0].iter().zip([1.0, -2.0, 0.0, 0.5]) {
@@ -626,7 +790,9 @@ mod tests {
             .collect();
         let (c, a) = min_area_ellipse(&pts, 1e-9).unwrap();
         assert!((c - DVec2::new(0.3, -1.0)).length() < 1e-4);
-        assert!((1.0 / a[0][0].sqrt() - 2.0).abs() < 1e-3 && (1.0 / a[1][1].sqrt() - 0.5).abs() < 1e-3);
+        assert!(
+            (1.0 / a[0][0].sqrt() - 2.0).abs() < 1e-3 && (1.0 / a[1][1].sqrt() - 0.5).abs() < 1e-3
+        );
         assert!(a[0][1].abs() < 1e-4);
     }
 }

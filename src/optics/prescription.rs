@@ -21,13 +21,16 @@
 //!
 //! Pupil sampling: for 64 film-radius buckets the axis-aligned box, on the
 //! plane of the rear vertex, that holds every ray reaching the scene is found
-//! by tracing a grid of rays from film points spread across the bucket, then
-//! grown by two grid cells (conservative: no ray that could pass is outside
+//! by tracing a 64×33 grid of rays (half plane, by symmetry) from 4 film
+//! points spread across the bucket, then grown by two grid cells (conservative: no ray that could pass is outside
 //! it). A film point at angle φ samples its bucket's box (computed on +x)
 //! rotated by φ, uniformly, pdf = 1/area. Blocked rays are zero-valued
 //! samples, so the estimator is unbiased for every film point and a flat field
 //! has no rings at bucket edges. Weight = area·D²/dist⁴ (projected solid
 //! angle, both planes perpendicular to the axis), so E = E[weight·L].
+
+// `!(x > 0.0)` is used on purpose: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 use super::{Camera, CameraRay};
 use crate::{Error, Result};
@@ -40,7 +43,10 @@ use std::path::Path;
 #[derive(Clone, Debug, PartialEq)]
 pub enum Ior {
     Constant(f64),
-    Table { wavelengths_nm: Vec<f64>, ior: Vec<f64> },
+    Table {
+        wavelengths_nm: Vec<f64>,
+        ior: Vec<f64>,
+    },
 }
 
 impl Ior {
@@ -48,7 +54,10 @@ impl Ior {
     pub fn at(&self, lambda_nm: f64) -> f64 {
         match self {
             Ior::Constant(n) => *n,
-            Ior::Table { wavelengths_nm: w, ior } => {
+            Ior::Table {
+                wavelengths_nm: w,
+                ior,
+            } => {
                 if lambda_nm <= w[0] {
                     return ior[0];
                 }
@@ -118,7 +127,10 @@ pub struct Paraxial {
 
 fn num(v: &Value, key: &str, file: &Path, ctx: &str) -> Result<f64> {
     match v.get(key) {
-        Some(Value::Number(n)) => n.as_f64().filter(|x| x.is_finite()).ok_or_else(|| bad(file, &format!("{ctx}: '{key}' is not finite"))),
+        Some(Value::Number(n)) => n
+            .as_f64()
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| bad(file, &format!("{ctx}: '{key}' is not finite"))),
         Some(_) => Err(bad(file, &format!("{ctx}: '{key}' must be a number"))),
         None => Err(bad(file, &format!("{ctx}: missing '{key}'"))),
     }
@@ -131,8 +143,15 @@ fn bad(file: &Path, msg: &str) -> Error {
 impl Prescription {
     /// Load an ISET JSON or pbrt `.dat` prescription (by extension).
     pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::Io { path: path.to_path_buf(), message: e.to_string() })?;
-        if path.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("dat")) {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::Io {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        if path
+            .extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| e.eq_ignore_ascii_case("dat"))
+        {
             Self::from_dat(&text, path)
         } else {
             Self::from_json(&text, path)
@@ -142,15 +161,29 @@ impl Prescription {
     /// Parse ISET lens JSON.
     pub fn from_json(text: &str, file: &Path) -> Result<Self> {
         let v: Value = serde_json::from_str(text).map_err(|e| {
-            let offset = text.lines().take(e.line().saturating_sub(1)).map(|l| l.len() + 1).sum::<usize>() + e.column().saturating_sub(1);
-            Error::from(crate::diag::Located::at_offset(file, text, offset, 1, format!("invalid JSON: {e}")))
+            let offset = text
+                .lines()
+                .take(e.line().saturating_sub(1))
+                .map(|l| l.len() + 1)
+                .sum::<usize>()
+                + e.column().saturating_sub(1);
+            Error::from(crate::diag::Located::at_offset(
+                file,
+                text,
+                offset,
+                1,
+                format!("invalid JSON: {e}"),
+            ))
         })?;
         Self::from_value(&v, file)
     }
 
     /// Build from an already-parsed ISET JSON value.
     pub fn from_value(v: &Value, file: &Path) -> Result<Self> {
-        let surfaces_v = v.get("surfaces").and_then(|s| s.as_array()).ok_or_else(|| bad(file, "expected a 'surfaces' array (ISET lens JSON)"))?;
+        let surfaces_v = v
+            .get("surfaces")
+            .and_then(|s| s.as_array())
+            .ok_or_else(|| bad(file, "expected a 'surfaces' array (ISET lens JSON)"))?;
         let waves: Option<Vec<f64>> = v
             .get("wave")
             .or_else(|| v.get("wavelength_nm"))
@@ -167,7 +200,10 @@ impl Prescription {
                         _ => false,
                     };
                     if nonzero {
-                        return Err(Error::NotSupported(format!("{}: {ctx}: aspheric surfaces ('{key}')", file.display())));
+                        return Err(Error::NotSupported(format!(
+                            "{}: {ctx}: aspheric surfaces ('{key}')",
+                            file.display()
+                        )));
                     }
                 }
             }
@@ -181,22 +217,54 @@ impl Prescription {
                 }
                 Some(Value::Array(a)) => {
                     let vals: Vec<f64> = a.iter().filter_map(|x| x.as_f64()).collect();
-                    let w = waves.as_ref().ok_or_else(|| bad(file, &format!("{ctx}: 'ior' is an array but the file has no 'wave' array")))?;
+                    let w = waves.as_ref().ok_or_else(|| {
+                        bad(
+                            file,
+                            &format!("{ctx}: 'ior' is an array but the file has no 'wave' array"),
+                        )
+                    })?;
                     if vals.len() != w.len() || vals.len() != a.len() {
-                        return Err(bad(file, &format!("{ctx}: 'ior' has {} values, 'wave' has {}", a.len(), w.len())));
+                        return Err(bad(
+                            file,
+                            &format!(
+                                "{ctx}: 'ior' has {} values, 'wave' has {}",
+                                a.len(),
+                                w.len()
+                            ),
+                        ));
                     }
                     if w.windows(2).any(|p| p[1] <= p[0]) {
                         return Err(bad(file, "'wave' must increase"));
                     }
                     let zero = vals.iter().all(|&x| x == 0.0);
-                    let vals = vals.into_iter().map(|x| if x == 0.0 { 1.0 } else { x }).collect();
-                    (Ior::Table { wavelengths_nm: w.clone(), ior: vals }, zero)
+                    let vals = vals
+                        .into_iter()
+                        .map(|x| if x == 0.0 { 1.0 } else { x })
+                        .collect();
+                    (
+                        Ior::Table {
+                            wavelengths_nm: w.clone(),
+                            ior: vals,
+                        },
+                        zero,
+                    )
                 }
                 _ => return Err(bad(file, &format!("{ctx}: missing numeric 'ior'"))),
             };
-            surfaces.push(Surface { radius_mm, thickness_mm, ior, semi_aperture_mm, is_stop: raw0 || radius_mm == 0.0 });
+            surfaces.push(Surface {
+                radius_mm,
+                thickness_mm,
+                ior,
+                semi_aperture_mm,
+                is_stop: raw0 || radius_mm == 0.0,
+            });
         }
-        let name = v.get("name").and_then(|n| n.as_str()).unwrap_or("").trim().to_string();
+        let name = v
+            .get("name")
+            .and_then(|n| n.as_str())
+            .unwrap_or("")
+            .trim()
+            .to_string();
         let p = Self { name, surfaces };
         p.validate(file)?;
         Ok(p)
@@ -211,7 +279,8 @@ impl Prescription {
             if t.is_empty() {
                 continue;
             }
-            let vals: std::result::Result<Vec<f64>, _> = t.split_whitespace().map(|x| x.parse::<f64>()).collect();
+            let vals: std::result::Result<Vec<f64>, _> =
+                t.split_whitespace().map(|x| x.parse::<f64>()).collect();
             let vals = vals.map_err(|_| {
                 Error::from(crate::diag::Located::at_offset(
                     file,
@@ -224,7 +293,8 @@ impl Prescription {
             match vals.len() {
                 1 if !seen_focal && surfaces.is_empty() => seen_focal = true,
                 4 => {
-                    let [radius_mm, thickness_mm, n, diameter] = [vals[0], vals[1], vals[2], vals[3]];
+                    let [radius_mm, thickness_mm, n, diameter] =
+                        [vals[0], vals[1], vals[2], vals[3]];
                     surfaces.push(Surface {
                         radius_mm,
                         thickness_mm,
@@ -239,13 +309,19 @@ impl Prescription {
                         text,
                         text.lines().take(ln).map(|l| l.len() + 1).sum(),
                         line.len().max(1),
-                        format!("expected 4 numbers (radius thickness ior aperture-diameter), found {k}"),
+                        format!(
+                            "expected 4 numbers (radius thickness ior aperture-diameter), found {k}"
+                        ),
                     )
                     .into());
                 }
             }
         }
-        let name = file.file_stem().and_then(|s| s.to_str()).unwrap_or("").to_string();
+        let name = file
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .unwrap_or("")
+            .to_string();
         let p = Self { name, surfaces };
         p.validate(file)?;
         Ok(p)
@@ -257,16 +333,28 @@ impl Prescription {
         }
         for (i, s) in self.surfaces.iter().enumerate() {
             if !(s.semi_aperture_mm > 0.0) {
-                return Err(bad(file, &format!("surface {i}: semi-aperture must be > 0 mm")));
+                return Err(bad(
+                    file,
+                    &format!("surface {i}: semi-aperture must be > 0 mm"),
+                ));
             }
             if s.thickness_mm < 0.0 && i + 1 < self.surfaces.len() {
-                return Err(bad(file, &format!("surface {i}: negative thickness {} mm", s.thickness_mm)));
+                return Err(bad(
+                    file,
+                    &format!("surface {i}: negative thickness {} mm", s.thickness_mm),
+                ));
             }
             if s.radius_mm != 0.0 && s.radius_mm.abs() < s.semi_aperture_mm * (1.0 - 1e-9) {
-                return Err(bad(file, &format!("surface {i}: |radius| {} mm is smaller than the semi-aperture {} mm", s.radius_mm, s.semi_aperture_mm)));
+                return Err(bad(
+                    file,
+                    &format!(
+                        "surface {i}: |radius| {} mm is smaller than the semi-aperture {} mm",
+                        s.radius_mm, s.semi_aperture_mm
+                    ),
+                ));
             }
             let n0 = s.ior.at(550.0);
-            if !(n0 >= 1.0 - 1e-9 && n0 < 5.0) {
+            if !(1.0 - 1e-9..5.0).contains(&n0) {
                 return Err(bad(file, &format!("surface {i}: implausible ior {n0}")));
             }
         }
@@ -280,7 +368,11 @@ impl Prescription {
 
     /// Medium on the object side of surface i.
     fn n_before(&self, i: usize, lambda_nm: f64) -> f64 {
-        if i == 0 { 1.0 } else { self.surfaces[i - 1].ior.at(lambda_nm) }
+        if i == 0 {
+            1.0
+        } else {
+            self.surfaces[i - 1].ior.at(lambda_nm)
+        }
     }
 
     /// Axial position of each vertex in the lens frame (rear vertex at 0).
@@ -302,16 +394,25 @@ impl Prescription {
     /// Starts at the vertex plane of surface `from` *before* refraction with
     /// height y and slope u in the medium before it; returns per-surface heights
     /// and the final (y, u) at the last vertex plane after refraction.
-    fn paraxial_trace(&self, from: usize, mut y: f64, mut u: f64, lambda_nm: f64) -> (Vec<f64>, f64, f64) {
+    fn paraxial_trace(
+        &self,
+        from: usize,
+        mut y: f64,
+        mut u: f64,
+        lambda_nm: f64,
+    ) -> (Vec<f64>, f64, f64) {
         let mut heights = vec![0.0; self.surfaces.len()];
-        for i in from..self.surfaces.len() {
-            let s = &self.surfaces[i];
+        for (i, s) in self.surfaces.iter().enumerate().skip(from) {
             if i > from {
                 y += self.surfaces[i - 1].thickness_mm * u;
             }
             heights[i] = y;
             let (n, n2) = (self.n_before(i, lambda_nm), s.ior.at(lambda_nm));
-            let c = if s.radius_mm == 0.0 { 0.0 } else { 1.0 / s.radius_mm };
+            let c = if s.radius_mm == 0.0 {
+                0.0
+            } else {
+                1.0 / s.radius_mm
+            };
             u = (n * u - y * (n2 - n) * c) / n2;
         }
         (heights, y, u)
@@ -321,7 +422,10 @@ impl Prescription {
     pub fn paraxial(&self, lambda_nm: f64) -> Result<Paraxial> {
         let (h, y, u) = self.paraxial_trace(0, 1.0, 0.0, lambda_nm);
         if u >= 0.0 || !u.is_finite() {
-            return Err(Error::Invalid(format!("lens '{}' is not converging (paraxial slope {u})", self.name)));
+            return Err(Error::Invalid(format!(
+                "lens '{}' is not converging (paraxial slope {u})",
+                self.name
+            )));
         }
         let efl = -1.0 / u;
         let bfd = -y / u;
@@ -342,7 +446,12 @@ impl Prescription {
             // Rays leave the stop edge (height a) with slope u0 in the medium
             // behind the stop; the image of that point is where they meet again.
             let run = |u0: f64| {
-                let (_, y, u) = self.paraxial_trace(stop + 1, a + self.surfaces[stop].thickness_mm * u0, u0, lambda_nm);
+                let (_, y, u) = self.paraxial_trace(
+                    stop + 1,
+                    a + self.surfaces[stop].thickness_mm * u0,
+                    u0,
+                    lambda_nm,
+                );
                 (y, u)
             };
             let (ya, ua) = run(0.0);
@@ -371,13 +480,20 @@ impl Prescription {
         let (_, y, u) = self.paraxial_trace(0, object_from_front_mm * u0, u0, lambda_nm);
         let d = -y / u;
         if !(u < 0.0 && d > 0.0 && d.is_finite()) {
-            return Err(Error::Invalid(format!("lens '{}': an object {object_from_front_mm} mm away has no real image", self.name)));
+            return Err(Error::Invalid(format!(
+                "lens '{}': an object {object_from_front_mm} mm away has no real image",
+                self.name
+            )));
         }
         Ok(d)
     }
 
     /// Film distance focusing an object at `focus_from_film_mm` from the film.
-    pub fn film_distance_for_focus_mm(&self, focus_from_film_mm: f64, lambda_nm: f64) -> Result<f64> {
+    pub fn film_distance_for_focus_mm(
+        &self,
+        focus_from_film_mm: f64,
+        lambda_nm: f64,
+    ) -> Result<f64> {
         let t = self.total_track_mm();
         let mut d = self.image_distance_mm(f64::INFINITY, lambda_nm)?;
         if focus_from_film_mm.is_infinite() {
@@ -386,7 +502,10 @@ impl Prescription {
         for _ in 0..50 {
             let obj = focus_from_film_mm - t - d;
             if obj <= 0.0 {
-                return Err(Error::Invalid(format!("lens '{}': focus distance {focus_from_film_mm} mm is inside the lens", self.name)));
+                return Err(Error::Invalid(format!(
+                    "lens '{}': focus distance {focus_from_film_mm} mm is inside the lens",
+                    self.name
+                )));
             }
             d = self.image_distance_mm(obj, lambda_nm)?;
         }
@@ -394,7 +513,12 @@ impl Prescription {
     }
 
     /// Sequential trace film → scene in the lens frame (mm). `d` need not be unit.
-    pub fn trace_to_scene(&self, mut o: DVec3, d: DVec3, lambda_nm: f64) -> std::result::Result<(DVec3, DVec3), Blocked> {
+    pub fn trace_to_scene(
+        &self,
+        mut o: DVec3,
+        d: DVec3,
+        lambda_nm: f64,
+    ) -> std::result::Result<(DVec3, DVec3), Blocked> {
         let mut d = d.normalize();
         if !(d.z > 0.0) {
             return Err(Blocked::Backwards);
@@ -475,21 +599,42 @@ pub struct PrescriptionCamera {
 
 impl PrescriptionCamera {
     /// Build with the film `film_distance_mm` behind the rear vertex; pupil
-    /// bounds are computed at `design_wavelength_nm` and grown to cover dispersion.
-    pub fn new(lens: Prescription, film_distance_mm: f64, design_wavelength_nm: f64) -> Result<Self> {
+    /// bounds are computed at `design_wavelength_nm` (dispersive lenses: the
+    /// union over 380, 550 and 780 nm).
+    pub fn new(
+        lens: Prescription,
+        film_distance_mm: f64,
+        design_wavelength_nm: f64,
+    ) -> Result<Self> {
         if !(film_distance_mm.is_finite() && film_distance_mm > 0.0) {
-            return Err(Error::Invalid(format!("lens '{}': film distance must be > 0 mm, got {film_distance_mm}", lens.name)));
+            return Err(Error::Invalid(format!(
+                "lens '{}': film distance must be > 0 mm, got {film_distance_mm}",
+                lens.name
+            )));
         }
-        let mut cam = Self { lens, film_distance_mm, max_film_radius_mm: 0.0, bounds: Vec::new(), wavelength_nm: design_wavelength_nm };
+        let mut cam = Self {
+            lens,
+            film_distance_mm,
+            max_film_radius_mm: 0.0,
+            bounds: Vec::new(),
+            wavelength_nm: design_wavelength_nm,
+        };
         cam.compute_bounds();
         if cam.bounds.iter().all(|b| b.is_none()) {
-            return Err(Error::Invalid(format!("lens '{}': no ray from the film reaches the scene", cam.lens.name)));
+            return Err(Error::Invalid(format!(
+                "lens '{}': no ray from the film reaches the scene",
+                cam.lens.name
+            )));
         }
         Ok(cam)
     }
 
     /// Film distance from a focus distance measured from the film (camera origin).
-    pub fn focused(lens: Prescription, focus_from_film_m: f64, design_wavelength_nm: f64) -> Result<Self> {
+    pub fn focused(
+        lens: Prescription,
+        focus_from_film_m: f64,
+        design_wavelength_nm: f64,
+    ) -> Result<Self> {
         let d = lens.film_distance_for_focus_mm(focus_from_film_m * 1e3, design_wavelength_nm)?;
         Self::new(lens, d, design_wavelength_nm)
     }
@@ -503,17 +648,36 @@ impl PrescriptionCamera {
     fn box_for(&self, r0: f64, r1: f64, n_film: usize, grid: usize) -> Option<[f64; 4]> {
         let ext = self.search_extent_mm();
         let cell = 2.0 * ext / grid as f64;
-        let mut b = [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY];
+        let mut b = [
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ];
         let mut any = false;
+        // Dispersive lenses: the union of the pupils at the ends and the middle
+        // of the visible range.
+        let waves: &[f64] = if self.lens.is_dispersive() {
+            &[380.0, 550.0, 780.0]
+        } else {
+            &[self.wavelength_nm]
+        };
         for k in 0..n_film {
-            let r = if n_film == 1 { r0 } else { r0 + (r1 - r0) * k as f64 / (n_film - 1) as f64 };
+            let r = if n_film == 1 {
+                r0
+            } else {
+                r0 + (r1 - r0) * k as f64 / (n_film - 1) as f64
+            };
             let o = DVec3::new(r, 0.0, -self.film_distance_mm);
             for i in 0..grid {
                 let x = -ext + (i as f64 + 0.5) * cell;
                 for j in 0..grid / 2 + 1 {
                     let y = (j as f64) * cell;
                     let target = DVec3::new(x, y, 0.0);
-                    if self.lens.trace_to_scene(o, target - o, self.wavelength_nm).is_ok() {
+                    if waves
+                        .iter()
+                        .any(|&wl| self.lens.trace_to_scene(o, target - o, wl).is_ok())
+                    {
                         any = true;
                         b[0] = b[0].min(x);
                         b[1] = b[1].max(x);
@@ -528,12 +692,21 @@ impl PrescriptionCamera {
         // Symmetric in y about the meridional plane.
         b[2] = -b[3];
         let m = 2.0 * cell;
-        Some([(b[0] - m).max(-ext), (b[1] + m).min(ext), (b[2] - m).max(-ext), (b[3] + m).min(ext)])
+        Some([
+            (b[0] - m).max(-ext),
+            (b[1] + m).min(ext),
+            (b[2] - m).max(-ext),
+            (b[3] + m).min(ext),
+        ])
     }
 
     fn compute_bounds(&mut self) {
         // Find the film radius where vignetting becomes complete.
-        let f = self.lens.paraxial(self.wavelength_nm).map(|p| p.effective_focal_length_mm.abs()).unwrap_or(self.film_distance_mm);
+        let f = self
+            .lens
+            .paraxial(self.wavelength_nm)
+            .map(|p| p.effective_focal_length_mm.abs())
+            .unwrap_or(self.film_distance_mm);
         let step = 0.02 * f;
         let mut r_max = step;
         let mut misses = 0;
@@ -556,7 +729,7 @@ impl PrescriptionCamera {
             .map(|k| {
                 let r0 = r_max * k as f64 / N_BUCKETS as f64;
                 let r1 = r_max * (k + 1) as f64 / N_BUCKETS as f64;
-                self.box_for(r0, r1, 5, 96)
+                self.box_for(r0, r1, 4, 64)
             })
             .collect();
     }
@@ -576,7 +749,11 @@ impl Camera for PrescriptionCamera {
         let p = -film_m * 1e3; // physical film point, mm
         let r = p.length();
         let b = self.pupil_bounds_mm(r)?;
-        let (cphi, sphi) = if r > 0.0 { (p.x / r, p.y / r) } else { (1.0, 0.0) };
+        let (cphi, sphi) = if r > 0.0 {
+            (p.x / r, p.y / r)
+        } else {
+            (1.0, 0.0)
+        };
         let q = DVec2::new(b[0] + u.x * (b[1] - b[0]), b[2] + u.y * (b[3] - b[2]));
         let q = DVec2::new(cphi * q.x - sphi * q.y, sphi * q.x + cphi * q.y);
         let area = (b[1] - b[0]) * (b[3] - b[2]);
@@ -586,12 +763,19 @@ impl Camera for PrescriptionCamera {
         let weight = area * self.film_distance_mm * self.film_distance_mm / (dist2 * dist2);
         let (po, pd) = self.lens.trace_to_scene(o, dir, lambda_nm).ok()?;
         let origin = DVec3::new(po.x, po.y, po.z + self.film_distance_mm) * 1e-3;
-        (weight.is_finite() && origin.is_finite()).then_some(CameraRay { origin, direction: pd, weight })
+        (weight.is_finite() && origin.is_finite()).then_some(CameraRay {
+            origin,
+            direction: pd,
+            weight,
+        })
     }
     fn is_dispersive(&self) -> bool {
         self.lens.is_dispersive()
     }
     fn describe(&self) -> String {
-        format!("lens prescription '{}', film distance {} mm", self.lens.name, self.film_distance_mm)
+        format!(
+            "lens prescription '{}', film distance {} mm",
+            self.lens.name, self.film_distance_mm
+        )
     }
 }

@@ -50,6 +50,9 @@
 //! ellipse blocked. Several wavelengths: the table nearest to the requested
 //! (hero) wavelength is used.
 
+// `!(x > 0.0)` is used on purpose: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use super::{Camera, CameraRay};
 use crate::{Error, Result};
 use glam::{DVec2, DVec3};
@@ -66,15 +69,31 @@ pub struct Poly {
 
 impl Poly {
     pub fn max_degree(&self) -> u32 {
-        self.terms.iter().map(|t| t[0].max(t[1]).max(t[2])).max().unwrap_or(0)
+        self.terms
+            .iter()
+            .map(|t| t[0].max(t[1]).max(t[2]))
+            .max()
+            .unwrap_or(0)
     }
     /// Value at (r, dx, dy) with precomputed power tables.
     fn eval_pow(&self, pr: &[f64], px: &[f64], py: &[f64]) -> f64 {
-        self.terms.iter().zip(&self.coeff).map(|(t, c)| c * pr[t[0] as usize] * px[t[1] as usize] * py[t[2] as usize]).sum()
+        self.terms
+            .iter()
+            .zip(&self.coeff)
+            .map(|(t, c)| c * pr[t[0] as usize] * px[t[1] as usize] * py[t[2] as usize])
+            .sum()
     }
     pub fn eval(&self, r: f64, dx: f64, dy: f64) -> f64 {
         let n = self.max_degree() as usize + 1;
-        let pw = |v: f64| (0..n).scan(1.0, |a, _| { let x = *a; *a *= v; Some(x) }).collect::<Vec<_>>();
+        let pw = |v: f64| {
+            (0..n)
+                .scan(1.0, |a, _| {
+                    let x = *a;
+                    *a *= v;
+                    Some(x)
+                })
+                .collect::<Vec<_>>()
+        };
         self.eval_pow(&pw(r), &pw(dx), &pw(dy))
     }
 }
@@ -101,11 +120,21 @@ impl Ellipses {
         }
         let k = p.partition_point(|&x| x <= r).clamp(1, p.len().max(2) - 1);
         if p.len() == 1 {
-            return Some([self.centers_x_mm[0], self.centers_y_mm[0], self.radii_x_mm[0], self.radii_y_mm[0]]);
+            return Some([
+                self.centers_x_mm[0],
+                self.centers_y_mm[0],
+                self.radii_x_mm[0],
+                self.radii_y_mm[0],
+            ]);
         }
         let t = ((r - p[k - 1]) / (p[k] - p[k - 1])).clamp(0.0, 1.0);
         let l = |v: &Vec<f64>| v[k - 1] + t * (v[k] - v[k - 1]);
-        Some([l(&self.centers_x_mm), l(&self.centers_y_mm), l(&self.radii_x_mm), l(&self.radii_y_mm)])
+        Some([
+            l(&self.centers_x_mm),
+            l(&self.centers_y_mm),
+            l(&self.radii_x_mm),
+            l(&self.radii_y_mm),
+        ])
     }
 }
 
@@ -155,19 +184,29 @@ impl PassNoPass {
                 if c.max_input_radius_mm.is_some_and(|m| r > m) {
                     return false;
                 }
-                c.radii_mm.iter().zip(&c.sensitivities).all(|(rad, s)| x * x + (y - s * r).powi(2) <= rad * rad)
+                c.radii_mm
+                    .iter()
+                    .zip(&c.sensitivities)
+                    .all(|(rad, s)| x * x + (y - s * r).powi(2) <= rad * rad)
             }
         }
     }
     /// Bounding box [x0, x1, y0, y1] of the pass region at input radius r.
     pub fn bbox(&self, r: f64) -> Option<[f64; 4]> {
         match self {
-            PassNoPass::Ellipses(e) => e.at(r).map(|[cx, cy, rx, ry]| [cx - rx, cx + rx, cy - ry, cy + ry]),
+            PassNoPass::Ellipses(e) => e
+                .at(r)
+                .map(|[cx, cy, rx, ry]| [cx - rx, cx + rx, cy - ry, cy + ry]),
             PassNoPass::Circles(c) => {
                 if c.max_input_radius_mm.is_some_and(|m| r > m) {
                     return None;
                 }
-                let mut b = [f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY];
+                let mut b = [
+                    f64::NEG_INFINITY,
+                    f64::INFINITY,
+                    f64::NEG_INFINITY,
+                    f64::INFINITY,
+                ];
                 for (rad, s) in c.radii_mm.iter().zip(&c.sensitivities) {
                     b[0] = b[0].max(-rad);
                     b[1] = b[1].min(*rad);
@@ -186,9 +225,19 @@ impl PassNoPass {
                 .iter()
                 .zip(&e.radii_y_mm)
                 .map(|(c, r)| c.abs() + r)
-                .chain(e.centers_x_mm.iter().zip(&e.radii_x_mm).map(|(c, r)| c.abs() + r))
+                .chain(
+                    e.centers_x_mm
+                        .iter()
+                        .zip(&e.radii_x_mm)
+                        .map(|(c, r)| c.abs() + r),
+                )
                 .fold(0.0, f64::max),
-            PassNoPass::Circles(c) => c.radii_mm.iter().zip(&c.sensitivities).map(|(rad, s)| (s * r).abs() + rad).fold(f64::INFINITY, f64::min),
+            PassNoPass::Circles(c) => c
+                .radii_mm
+                .iter()
+                .zip(&c.sensitivities)
+                .map(|(rad, s)| (s * r).abs() + rad)
+                .fold(f64::INFINITY, f64::min),
         }
     }
 }
@@ -224,31 +273,65 @@ fn bad(file: &Path, msg: &str) -> Error {
 }
 
 fn f64_field(v: &Value, key: &str, file: &Path) -> Result<f64> {
-    v.get(key).and_then(|x| x.as_f64()).filter(|x| x.is_finite()).ok_or_else(|| bad(file, &format!("missing or non-numeric '{key}'")))
+    v.get(key)
+        .and_then(|x| x.as_f64())
+        .filter(|x| x.is_finite())
+        .ok_or_else(|| bad(file, &format!("missing or non-numeric '{key}'")))
 }
 
 fn vec_field(v: &Value, key: &str, file: &Path) -> Result<Vec<f64>> {
-    let a = v.get(key).and_then(|x| x.as_array()).ok_or_else(|| bad(file, &format!("missing array '{key}'")))?;
-    a.iter().map(|x| x.as_f64().filter(|x| x.is_finite()).ok_or_else(|| bad(file, &format!("'{key}' holds a non-number")))).collect()
+    let a = v
+        .get(key)
+        .and_then(|x| x.as_array())
+        .ok_or_else(|| bad(file, &format!("missing array '{key}'")))?;
+    a.iter()
+        .map(|x| {
+            x.as_f64()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| bad(file, &format!("'{key}' holds a non-number")))
+        })
+        .collect()
 }
 
 impl Rtf {
     pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::Io { path: path.to_path_buf(), message: e.to_string() })?;
+        let text = std::fs::read_to_string(path).map_err(|e| Error::Io {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
         let v: Value = serde_json::from_str(&text).map_err(|e| {
-            let offset = text.lines().take(e.line().saturating_sub(1)).map(|l| l.len() + 1).sum::<usize>() + e.column().saturating_sub(1);
-            Error::from(crate::diag::Located::at_offset(path, &text, offset, 1, format!("invalid JSON: {e}")))
+            let offset = text
+                .lines()
+                .take(e.line().saturating_sub(1))
+                .map(|l| l.len() + 1)
+                .sum::<usize>()
+                + e.column().saturating_sub(1);
+            Error::from(crate::diag::Located::at_offset(
+                path,
+                &text,
+                offset,
+                1,
+                format!("invalid JSON: {e}"),
+            ))
         })?;
         Self::from_value(&v, path)
     }
 
     pub fn from_value(v: &Value, file: &Path) -> Result<Self> {
-        let polys = v.get("polynomials").and_then(|p| p.as_array()).ok_or_else(|| bad(file, "expected a 'polynomials' array (ISET RTF JSON)"))?;
+        let polys = v
+            .get("polynomials")
+            .and_then(|p| p.as_array())
+            .ok_or_else(|| bad(file, "expected a 'polynomials' array (ISET RTF JSON)"))?;
         let mut waves = Vec::new();
         for (wi, pw) in polys.iter().enumerate() {
             let wavelength_nm = f64_field(pw, "wavelength_nm", file)?;
-            let pnp = pw.get("passnopass").ok_or_else(|| bad(file, &format!("polynomials[{wi}]: missing 'passnopass'")))?;
-            let method = pnp.get("method").and_then(|m| m.as_str()).unwrap_or("minimalellipse");
+            let pnp = pw
+                .get("passnopass")
+                .ok_or_else(|| bad(file, &format!("polynomials[{wi}]: missing 'passnopass'")))?;
+            let method = pnp
+                .get("method")
+                .and_then(|m| m.as_str())
+                .unwrap_or("minimalellipse");
             let pass = match method {
                 "minimalellipse" => {
                     let e = Ellipses {
@@ -260,13 +343,31 @@ impl Rtf {
                         plane_distance_mm: f64_field(pnp, "intersectPlaneDistance", file)?,
                     };
                     let n = e.positions_mm.len();
-                    if n == 0 || [&e.radii_x_mm, &e.radii_y_mm, &e.centers_x_mm, &e.centers_y_mm].iter().any(|a| a.len() != n) {
-                        return Err(bad(file, &format!("polynomials[{wi}].passnopass: arrays must have equal, non-zero length")));
+                    if n == 0
+                        || [
+                            &e.radii_x_mm,
+                            &e.radii_y_mm,
+                            &e.centers_x_mm,
+                            &e.centers_y_mm,
+                        ]
+                        .iter()
+                        .any(|a| a.len() != n)
+                    {
+                        return Err(bad(
+                            file,
+                            &format!(
+                                "polynomials[{wi}].passnopass: arrays must have equal, non-zero length"
+                            ),
+                        ));
                     }
                     if e.positions_mm.windows(2).any(|w| w[1] <= w[0]) {
                         return Err(bad(file, "passnopass 'positions' must increase"));
                     }
-                    if e.radii_x_mm.iter().chain(&e.radii_y_mm).any(|r| !(*r > 0.0)) {
+                    if e.radii_x_mm
+                        .iter()
+                        .chain(&e.radii_y_mm)
+                        .any(|r| !(*r > 0.0))
+                    {
                         return Err(bad(file, "passnopass radii must be > 0"));
                     }
                     PassNoPass::Ellipses(e)
@@ -279,47 +380,84 @@ impl Rtf {
                         max_input_radius_mm: pnp.get("maxInputRadius").and_then(|v| v.as_f64()),
                     };
                     if c.radii_mm.is_empty() || c.radii_mm.len() != c.sensitivities.len() {
-                        return Err(bad(file, "passnopass: circleRadii and circleSensitivities must have equal, non-zero length"));
+                        return Err(bad(
+                            file,
+                            "passnopass: circleRadii and circleSensitivities must have equal, non-zero length",
+                        ));
                     }
                     PassNoPass::Circles(c)
                 }
                 other => {
-                    return Err(Error::NotSupported(format!("{}: pass/no-pass method '{other}' (known: minimalellipse, circles)", file.display())));
+                    return Err(Error::NotSupported(format!(
+                        "{}: pass/no-pass method '{other}' (known: minimalellipse, circles)",
+                        file.display()
+                    )));
                 }
             };
             let mut outputs: [Option<Poly>; 6] = Default::default();
-            for p in pw.get("poly").and_then(|p| p.as_array()).ok_or_else(|| bad(file, "missing 'poly' array"))? {
+            for p in pw
+                .get("poly")
+                .and_then(|p| p.as_array())
+                .ok_or_else(|| bad(file, "missing 'poly' array"))?
+            {
                 let name = p.get("outputname").and_then(|n| n.as_str()).unwrap_or("");
                 let Some(k) = OUT_NAMES.iter().position(|&n| n == name) else {
-                    return Err(bad(file, &format!("unknown outputname '{name}' (expected one of {OUT_NAMES:?})")));
+                    return Err(bad(
+                        file,
+                        &format!("unknown outputname '{name}' (expected one of {OUT_NAMES:?})"),
+                    ));
                 };
                 let coeff = vec_field(p, "coeff", file)?;
                 let ex = |key: &str| -> Result<Vec<u32>> {
                     vec_field(p, key, file)?
                         .into_iter()
-                        .map(|x| if x >= 0.0 && x.fract() == 0.0 && x < 64.0 { Ok(x as u32) } else { Err(bad(file, &format!("{name}.{key}: bad exponent {x}"))) })
+                        .map(|x| {
+                            if x >= 0.0 && x.fract() == 0.0 && x < 64.0 {
+                                Ok(x as u32)
+                            } else {
+                                Err(bad(file, &format!("{name}.{key}: bad exponent {x}")))
+                            }
+                        })
                         .collect()
                 };
                 let (tr, tx, ty) = (ex("termr")?, ex("termdx")?, ex("termdy")?);
                 if tr.len() != coeff.len() || tx.len() != coeff.len() || ty.len() != coeff.len() {
-                    return Err(bad(file, &format!("{name}: coeff/termr/termdx/termdy lengths differ")));
+                    return Err(bad(
+                        file,
+                        &format!("{name}: coeff/termr/termdx/termdy lengths differ"),
+                    ));
                 }
                 let terms = (0..coeff.len()).map(|i| [tr[i], tx[i], ty[i]]).collect();
                 outputs[k] = Some(Poly { terms, coeff });
             }
             for k in [0, 1, 3, 4] {
                 if outputs[k].is_none() {
-                    return Err(bad(file, &format!("polynomials[{wi}]: missing '{}'", OUT_NAMES[k])));
+                    return Err(bad(
+                        file,
+                        &format!("polynomials[{wi}]: missing '{}'", OUT_NAMES[k]),
+                    ));
                 }
             }
-            waves.push(RtfWave { wavelength_nm, outputs, pass });
+            waves.push(RtfWave {
+                wavelength_nm,
+                outputs,
+                pass,
+            });
         }
         if waves.is_empty() {
             return Err(bad(file, "'polynomials' is empty"));
         }
         Ok(Self {
-            name: v.get("name").and_then(|n| n.as_str()).unwrap_or("").to_string(),
-            description: v.get("description").and_then(|n| n.as_str()).unwrap_or("").to_string(),
+            name: v
+                .get("name")
+                .and_then(|n| n.as_str())
+                .unwrap_or("")
+                .to_string(),
+            description: v
+                .get("description")
+                .and_then(|n| n.as_str())
+                .unwrap_or("")
+                .to_string(),
             thickness_mm: f64_field(v, "thickness", file)?,
             plane_offset_input_mm: f64_field(v, "planeoffsetinput", file)?,
             plane_offset_output_mm: f64_field(v, "planeoffsetoutput", file)?,
@@ -386,7 +524,11 @@ impl Rtf {
     fn wave(&self, lambda_nm: f64) -> &RtfWave {
         self.waves
             .iter()
-            .min_by(|a, b| (a.wavelength_nm - lambda_nm).abs().total_cmp(&(b.wavelength_nm - lambda_nm).abs()))
+            .min_by(|a, b| {
+                (a.wavelength_nm - lambda_nm)
+                    .abs()
+                    .total_cmp(&(b.wavelength_nm - lambda_nm).abs())
+            })
             .unwrap()
     }
 
@@ -415,7 +557,15 @@ impl Rtf {
         if !w.pass.passes(r, dx / d.z * l, r + dy / d.z * l) {
             return None;
         }
-        let deg = (w.outputs.iter().flatten().map(|p| p.max_degree()).max().unwrap_or(0) as usize + 1).min(MAX_POWERS);
+        let deg = (w
+            .outputs
+            .iter()
+            .flatten()
+            .map(|p| p.max_degree())
+            .max()
+            .unwrap_or(0) as usize
+            + 1)
+        .min(MAX_POWERS);
         let mut pr = [1.0; MAX_POWERS];
         let mut px_ = [1.0; MAX_POWERS];
         let mut py_ = [1.0; MAX_POWERS];
@@ -426,7 +576,9 @@ impl Rtf {
         }
         let ev = |k: usize| w.outputs[k].as_ref().map(|p| p.eval_pow(&pr, &px_, &py_));
         let (ox, oy) = (ev(0)?, ev(1)?);
-        let oz = ev(2).unwrap_or(self.plane_offset_input_mm + self.thickness_mm + self.plane_offset_output_mm);
+        let oz = ev(2).unwrap_or(
+            self.plane_offset_input_mm + self.thickness_mm + self.plane_offset_output_mm,
+        );
         let (odx, ody) = (ev(3)?, ev(4)?);
         let odz = match ev(5) {
             Some(z) => z,
@@ -460,17 +612,27 @@ pub struct RtfCamera {
 impl RtfCamera {
     pub fn new(rtf: Rtf, film_distance_mm: f64) -> Result<Self> {
         if !(film_distance_mm.is_finite() && film_distance_mm > 0.0) {
-            return Err(Error::Invalid(format!("RTF '{}': film distance must be > 0 mm, got {film_distance_mm}", rtf.name)));
+            return Err(Error::Invalid(format!(
+                "RTF '{}': film distance must be > 0 mm, got {film_distance_mm}",
+                rtf.name
+            )));
         }
         let reach_mm = rtf
             .waves
             .iter()
             .map(|w| {
-                let r_top = w.pass.max_radius_mm().unwrap_or(10.0 * film_distance_mm.max(rtf.thickness_mm));
+                let r_top = w
+                    .pass
+                    .max_radius_mm()
+                    .unwrap_or(10.0 * film_distance_mm.max(rtf.thickness_mm));
                 w.pass.reach(r_top)
             })
             .collect();
-        Ok(Self { rtf, film_distance_mm, reach_mm })
+        Ok(Self {
+            rtf,
+            film_distance_mm,
+            reach_mm,
+        })
     }
     /// Input plane position (film at 0), mm.
     pub fn input_plane_z_mm(&self) -> f64 {
@@ -487,11 +649,25 @@ impl RtfCamera {
         let g = self.input_plane_z_mm().abs();
         let h = self.input_plane_z_mm() + w.pass.plane_distance_mm();
         // Largest lateral slope reaching any pass region from this film point.
-        let wi = self.rtf.waves.iter().position(|x| std::ptr::eq(x, w)).unwrap_or(0);
-        let reach = self.reach_mm.get(wi).copied().unwrap_or_else(|| w.pass.reach(r_film + g));
+        let wi = self
+            .rtf
+            .waves
+            .iter()
+            .position(|x| std::ptr::eq(x, w))
+            .unwrap_or(0);
+        let reach = self
+            .reach_mm
+            .get(wi)
+            .copied()
+            .unwrap_or_else(|| w.pass.reach(r_film + g));
         let slope = (r_film + reach) / h.abs().max(1e-9);
         let delta = g * slope * 1.05;
-        let mut b = [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY];
+        let mut b = [
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ];
         let n = 8;
         for i in 0..=n {
             let r = r_film - delta + 2.0 * delta * i as f64 / n as f64;
@@ -521,7 +697,11 @@ impl Camera for RtfCamera {
         let p = -film_m * 1e3;
         let r = p.length();
         let b = self.sampling_box(w, r)?;
-        let (s, c) = if r > 0.0 { (p.x / r, p.y / r) } else { (0.0, 1.0) };
+        let (s, c) = if r > 0.0 {
+            (p.x / r, p.y / r)
+        } else {
+            (0.0, 1.0)
+        };
         // Sample in the frame where the film point is on +y, then rotate back.
         let (qx, qy) = (b[0] + u.x * (b[1] - b[0]), b[2] + u.y * (b[3] - b[2]));
         let q = DVec2::new(qx * c + qy * s, -qx * s + qy * c);
@@ -539,12 +719,24 @@ impl Camera for RtfCamera {
         let pin = o + d * t;
         let (po, pd) = self.rtf.transfer(w, pin.x, pin.y, d)?;
         let origin = DVec3::new(po.x, po.y, z_in + po.z) * 1e-3;
-        (weight.is_finite() && origin.is_finite()).then_some(CameraRay { origin, direction: pd, weight })
+        (weight.is_finite() && origin.is_finite()).then_some(CameraRay {
+            origin,
+            direction: pd,
+            weight,
+        })
     }
     fn is_dispersive(&self) -> bool {
-        self.rtf.waves.len() > 1 && self.rtf.waves.iter().any(|w| w.outputs != self.rtf.waves[0].outputs || w.pass != self.rtf.waves[0].pass)
+        self.rtf.waves.len() > 1
+            && self
+                .rtf
+                .waves
+                .iter()
+                .any(|w| w.outputs != self.rtf.waves[0].outputs || w.pass != self.rtf.waves[0].pass)
     }
     fn describe(&self) -> String {
-        format!("ray-transfer function '{}', film distance {} mm", self.rtf.name, self.film_distance_mm)
+        format!(
+            "ray-transfer function '{}', film distance {} mm",
+            self.rtf.name, self.film_distance_mm
+        )
     }
 }

@@ -31,17 +31,25 @@ impl ThinLens {
     /// Validate and build.
     pub fn new(focal_length_m: f64, f_number: f64, focus_distance_m: f64) -> Result<Self> {
         if !(focal_length_m.is_finite() && focal_length_m > 0.0) {
-            return Err(Error::Invalid(format!("thin lens: focal length must be > 0 m, got {focal_length_m}")));
+            return Err(Error::Invalid(format!(
+                "thin lens: focal length must be > 0 m, got {focal_length_m}"
+            )));
         }
         if !(f_number.is_finite() && f_number > 0.0) {
-            return Err(Error::Invalid(format!("thin lens: f-number must be > 0, got {f_number}")));
+            return Err(Error::Invalid(format!(
+                "thin lens: f-number must be > 0, got {f_number}"
+            )));
         }
         if focus_distance_m.is_nan() || focus_distance_m <= focal_length_m {
             return Err(Error::Invalid(format!(
                 "thin lens: focus distance ({focus_distance_m} m) must exceed the focal length ({focal_length_m} m)"
             )));
         }
-        Ok(Self { focal_length_m, f_number, focus_distance_m })
+        Ok(Self {
+            focal_length_m,
+            f_number,
+            focus_distance_m,
+        })
     }
 
     /// Aperture radius R = f/(2N), metres.
@@ -57,7 +65,11 @@ impl ThinLens {
 
 /// Thin-lens image distance for an object at `object_m` (∞ allowed).
 pub fn image_distance_m(f_m: f64, object_m: f64) -> f64 {
-    if object_m.is_infinite() { f_m } else { f_m * object_m / (object_m - f_m) }
+    if object_m.is_infinite() {
+        f_m
+    } else {
+        f_m * object_m / (object_m - f_m)
+    }
 }
 
 /// Shirley–Chiu concentric map of the unit square onto the unit disk
@@ -71,7 +83,10 @@ pub fn concentric_disk(u: DVec2) -> DVec2 {
     let (r, phi) = if a.abs() > b.abs() {
         (a, std::f64::consts::FRAC_PI_4 * (b / a))
     } else {
-        (b, std::f64::consts::FRAC_PI_2 - std::f64::consts::FRAC_PI_4 * (a / b))
+        (
+            b,
+            std::f64::consts::FRAC_PI_2 - std::f64::consts::FRAC_PI_4 * (a / b),
+        )
     };
     DVec2::new(r * phi.cos(), r * phi.sin())
 }
@@ -97,7 +112,11 @@ impl Camera for ThinLens {
         if !(weight.is_finite() && dir.is_finite()) {
             return None;
         }
-        Some(CameraRay { origin: lens, direction: dir, weight })
+        Some(CameraRay {
+            origin: lens,
+            direction: dir,
+            weight,
+        })
     }
 
     fn describe(&self) -> String {
@@ -165,7 +184,10 @@ mod tests {
             let truth = blur_closed_form(&lens, z_o);
             // 512 rim samples: the polygonal rim underestimates the circle radius by
             // 1−cos(π/512·4) ≈ 8e-5 relative, far below the 1 % tolerance.
-            assert!((measured / truth - 1.0).abs() < 0.01, "z_o={z_o}: measured {measured}, closed form {truth}");
+            assert!(
+                (measured / truth - 1.0).abs() < 0.01,
+                "z_o={z_o}: measured {measured}, closed form {truth}"
+            );
         }
     }
 
@@ -180,7 +202,10 @@ mod tests {
             for i in 0..n {
                 for j in 0..n {
                     let u = DVec2::new((i as f64 + 0.5) / n as f64, (j as f64 + 0.5) / n as f64);
-                    s += lens.sample_ray(DVec2::new(x, 0.0), u, 550.0).unwrap().weight;
+                    s += lens
+                        .sample_ray(DVec2::new(x, 0.0), u, 550.0)
+                        .unwrap()
+                        .weight;
                 }
             }
             s / (n * n) as f64
@@ -197,6 +222,10 @@ mod tests {
         let x = 0.03;
         let cos = d / (d * d + x * x).sqrt();
         let ratio = mean(x) / e0;
-        assert!((ratio / cos.powi(4) - 1.0).abs() < 0.02, "{ratio} vs {}", cos.powi(4));
+        assert!(
+            (ratio / cos.powi(4) - 1.0).abs() < 0.02,
+            "{ratio} vs {}",
+            cos.powi(4)
+        );
     }
 }
