@@ -46,8 +46,135 @@ pub struct FitRtfArgs {
     pub wavelengths: Vec<f64>,
     #[arg(long)]
     pub out: PathBuf,
+    /// Pass/no-pass representation: `ellipses` (minimum-area enclosing
+    /// ellipse per field radius, as the paper's files) or `area-ellipses`
+    /// (radial extent and area of the pass region; exact flux when vignetted).
+    #[arg(long, default_value = "ellipses")]
+    pub pass_method: String,
 }
 
-pub fn run(_c: LensCmd) -> Result<i32> {
-    Err(Error::NotSupported("lens".into()))
+pub fn run(c: LensCmd) -> Result<i32> {
+    use camsim::optics::analysis::{self, DEFAULT_WAVELENGTH_NM, LensFile};
+    let mut out = String::new();
+    match c {
+        LensCmd::Info(a) => {
+            let lens = analysis::load_lens(&a.lens)?;
+            let i = analysis::lens_info(&lens, DEFAULT_WAVELENGTH_NM)?;
+            out.push_str("focal_length_mm,f_number,working_f_number,exit_pupil_from_film_mm,exit_pupil_radius_mm,film_distance_infinity_mm\n");
+            out.push_str(&format!(
+                "{},{},{},{},{},{}\n",
+                i.focal_length_mm,
+                i.f_number,
+                i.working_f_number,
+                i.exit_pupil_from_film_mm,
+                i.exit_pupil_radius_mm,
+                i.film_distance_infinity_mm
+            ));
+        }
+        LensCmd::Ri(a) => {
+            let w = a.wavelength_nm.unwrap_or(DEFAULT_WAVELENGTH_NM);
+            let lens = analysis::load_lens(&a.lens)?;
+            let cam = analysis::lens_camera(lens, a.film_distance_mm, None, w)?;
+            let max_mm = match &cam {
+                analysis::LensCamera::Prescription(c) => c.max_film_radius_mm,
+                analysis::LensCamera::Rtf(c) => match c.rtf.waves[0].pass.max_radius_mm() {
+                    Some(m) => m,
+                    None => c.film_distance_mm,
+                },
+            };
+            let heights: Vec<f64> = (0..=40).map(|k| max_mm * k as f64 / 40.0).collect();
+            let ri = analysis::relative_illumination(cam.camera(), &heights, w, 200)?;
+            out.push_str("field_height_mm,relative_illumination\n");
+            for (h, v) in heights.iter().zip(ri) {
+                out.push_str(&format!("{h},{v}\n"));
+            }
+        }
+        LensCmd::Esf(a) => {
+            let lens = analysis::load_lens(&a.lens)?;
+            if !(a.object_distance_m.is_finite() && a.object_distance_m > 0.0) {
+                return Err(Error::Invalid(format!(
+                    "--object-distance-m must be > 0 and finite, got {}",
+                    a.object_distance_m
+                )));
+            }
+            // Without a film distance a prescription is focused on the object
+            // (paraxial); an RTF uses its infinity-focus film distance.
+            let film = match (&lens, a.film_distance_mm) {
+                (_, Some(d)) => Some(d),
+                (LensFile::Prescription(p), None) => {
+                    Some(p.image_distance_mm(a.object_distance_m * 1e3, DEFAULT_WAVELENGTH_NM)?)
+                }
+                (LensFile::Rtf(_), None) => None,
+            };
+            let cam = analysis::lens_camera(lens, film, None, DEFAULT_WAVELENGTH_NM)?;
+            let z_obj = cam.front_vertex_z_mm() + a.object_distance_m * 1e3;
+            let field = a.field_mm.unwrap_or(0.0);
+            let half =
+                analysis::blur_half_width_um(cam.camera(), z_obj, field, DEFAULT_WAVELENGTH_NM);
+            let w = (1.5 * half).max(2.0);
+            let pos: Vec<f64> = (0..=200).map(|k| -w + 2.0 * w * k as f64 / 200.0).collect();
+            let esf = analysis::edge_spread(
+                cam.camera(),
+                z_obj,
+                field,
+                &pos,
+                DEFAULT_WAVELENGTH_NM,
+                128,
+            )?;
+            out.push_str("position_um,esf,lsf\n");
+            for (p, (e, l)) in pos.iter().zip(esf) {
+                out.push_str(&format!("{p},{e},{l}\n"));
+            }
+        }
+        LensCmd::FitRtf(a) => {
+            let lens = analysis::load_lens(&a.prescription)?;
+            let LensFile::Prescription(p) = lens else {
+                return Err(Error::Invalid(format!(
+                    "{}: fit-rtf needs a lens prescription, not an RTF",
+                    a.prescription.display()
+                )));
+            };
+            let waves = if a.wavelengths.is_empty() {
+                vec![DEFAULT_WAVELENGTH_NM]
+            } else {
+                a.wavelengths.clone()
+            };
+            let pass_method = match a.pass_method.as_str() {
+                "ellipses" | "ellipse" | "minimalellipse" => {
+                    camsim::optics::fit::PassMethod::Ellipses
+                }
+                "area-ellipses" => camsim::optics::fit::PassMethod::AreaEllipses,
+                other => {
+                    return Err(Error::Invalid(format!(
+                        "--pass-method: expected 'ellipses' or 'area-ellipses', got '{other}'"
+                    )));
+                }
+            };
+            let opts = camsim::optics::fit::FitOptions {
+                degree: a.degree,
+                pass_method,
+                ..Default::default()
+            };
+            let (rtf, reports) = camsim::optics::fit::fit_rtf(&p, &waves, &opts)?;
+            let text = serde_json::to_string_pretty(&rtf.to_json())
+                .map_err(|e| Error::Invalid(e.to_string()))?;
+            camsim::diag::write_atomic(&a.out, text.as_bytes())?;
+            out.push_str("wavelength_nm,output,degree,n_terms,n_samples,condition_number,rms_residual,max_residual\n");
+            for r in reports {
+                out.push_str(&format!(
+                    "{},{},{},{},{},{},{},{}\n",
+                    r.wavelength_nm,
+                    r.output,
+                    r.degree,
+                    r.n_terms,
+                    r.n_samples,
+                    r.condition_number,
+                    r.rms_residual,
+                    r.max_residual
+                ));
+            }
+        }
+    }
+    print!("{out}");
+    Ok(0)
 }

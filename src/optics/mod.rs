@@ -42,3 +42,9 @@ pub trait Camera: Send + Sync {
     /// Human-readable description for sidecars and reports.
     fn describe(&self) -> String;
 }
+
+pub mod analysis;
+pub mod fit;
+pub mod prescription;
+pub mod rtf;
+pub mod thin_lens;

@@ -1,0 +1,411 @@
+//! Lens analysis through the camera interface: relative illumination and
+//! geometric edge-spread functions use `Camera::sample_ray` exactly as the
+//! renderer does, so they validate the rendering path itself.
+//!
+//! Conventions: field heights are image-side film radii (mm) along +y for
+//! relative illumination and along +x for the ESF. Object distances for the
+//! ESF are measured from the lens front vertex (Zemax "object thickness");
+//! camera space has the film at the origin for prescriptions and RTFs.
+//! Quadrature: an n×n midpoint grid over the pupil sample square
+//! (deterministic, identical for every thread count).
+
+// `!(x > 0.0)` is used on purpose: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+use super::Camera;
+use super::prescription::{Prescription, PrescriptionCamera};
+use super::rtf::{Rtf, RtfCamera};
+use crate::{Error, Result};
+use glam::DVec2;
+use rayon::prelude::*;
+use serde_json::Value;
+use std::path::Path;
+
+/// A lens file: prescription or RTF.
+#[derive(Clone, Debug)]
+pub enum LensFile {
+    Prescription(Prescription),
+    Rtf(Rtf),
+}
+
+/// Default wavelength for monochromatic analysis (nm), as the paper (550 nm).
+pub const DEFAULT_WAVELENGTH_NM: f64 = 550.0;
+
+/// Load a lens file: `.dat` → prescription; JSON with `surfaces` →
+/// prescription; JSON with `polynomials` → RTF.
+pub fn load_lens(path: &Path) -> Result<LensFile> {
+    if path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("dat"))
+    {
+        return Ok(LensFile::Prescription(Prescription::load(path)?));
+    }
+    let text = std::fs::read_to_string(path).map_err(|e| Error::Io {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    let v: Value = serde_json::from_str(&text).map_err(|e| {
+        let offset = text
+            .lines()
+            .take(e.line().saturating_sub(1))
+            .map(|l| l.len() + 1)
+            .sum::<usize>()
+            + e.column().saturating_sub(1);
+        Error::from(crate::diag::Located::at_offset(
+            path,
+            &text,
+            offset,
+            1,
+            format!("invalid JSON: {e}"),
+        ))
+    })?;
+    if v.get("polynomials").is_some() {
+        Ok(LensFile::Rtf(Rtf::from_value(&v, path)?))
+    } else if v.get("surfaces").is_some() {
+        Ok(LensFile::Prescription(Prescription::from_value(&v, path)?))
+    } else {
+        Err(Error::Invalid(format!(
+            "{}: neither a lens prescription ('surfaces') nor an RTF ('polynomials')",
+            path.display()
+        )))
+    }
+}
+
+/// A camera built from a lens file, with what analysis needs to know.
+pub enum LensCamera {
+    Prescription(PrescriptionCamera),
+    Rtf(RtfCamera),
+}
+
+impl LensCamera {
+    pub fn camera(&self) -> &dyn Camera {
+        match self {
+            LensCamera::Prescription(c) => c,
+            LensCamera::Rtf(c) => c,
+        }
+    }
+    /// Front vertex position in camera space (film at 0), mm.
+    pub fn front_vertex_z_mm(&self) -> f64 {
+        match self {
+            LensCamera::Prescription(c) => c.film_distance_mm + c.lens.total_track_mm(),
+            LensCamera::Rtf(c) => c.front_vertex_z_mm(),
+        }
+    }
+    pub fn film_distance_mm(&self) -> f64 {
+        match self {
+            LensCamera::Prescription(c) => c.film_distance_mm,
+            LensCamera::Rtf(c) => c.film_distance_mm,
+        }
+    }
+}
+
+/// Build the camera for a lens file. Film distance wins over focus distance
+/// (measured from the film); prescriptions default to focus at infinity. An
+/// RTF needs a film distance unless its file came from `fit-rtf`, which
+/// records none: then `Error::Invalid` asks for one.
+pub fn lens_camera(
+    lens: LensFile,
+    film_distance_mm: Option<f64>,
+    focus_from_film_m: Option<f64>,
+    wavelength_nm: f64,
+) -> Result<LensCamera> {
+    match lens {
+        LensFile::Prescription(p) => {
+            let d = match (film_distance_mm, focus_from_film_m) {
+                (Some(d), _) => d,
+                (None, Some(z)) => p.film_distance_for_focus_mm(z * 1e3, wavelength_nm)?,
+                (None, None) => p.film_distance_for_focus_mm(f64::INFINITY, wavelength_nm)?,
+            };
+            Ok(LensCamera::Prescription(PrescriptionCamera::new(
+                p,
+                d,
+                wavelength_nm,
+            )?))
+        }
+        LensFile::Rtf(r) => {
+            let d = match (film_distance_mm, focus_from_film_m) {
+                (Some(d), _) => d,
+                (None, Some(_)) => {
+                    return Err(Error::NotSupported(format!(
+                        "RTF '{}': focus distance → film distance; give the film distance instead",
+                        r.name
+                    )));
+                }
+                (None, None) => rtf_infinity_film_distance_mm(&r, wavelength_nm)?,
+            };
+            Ok(LensCamera::Rtf(RtfCamera::new(r, d)?))
+        }
+    }
+}
+
+/// Load a lens file and build its camera for the renderer
+/// (scene `CameraModel::LensFile`): distances in metres; the focus distance
+/// is measured from the film (camera origin). Stopping a lens file down
+/// (`aperture_diameter_m`) is not supported.
+pub fn load_lens_camera(
+    path: &Path,
+    film_distance_m: Option<f64>,
+    focus_distance_m: Option<f64>,
+    aperture_diameter_m: Option<f64>,
+) -> Result<Box<dyn Camera>> {
+    if aperture_diameter_m.is_some() {
+        return Err(Error::NotSupported(format!(
+            "{}: changing the aperture of a lens file",
+            path.display()
+        )));
+    }
+    let cam = lens_camera(
+        load_lens(path)?,
+        film_distance_m.map(|d| d * 1e3),
+        focus_distance_m,
+        DEFAULT_WAVELENGTH_NM,
+    )?;
+    Ok(match cam {
+        LensCamera::Prescription(c) => Box::new(c),
+        LensCamera::Rtf(c) => Box::new(c),
+    })
+}
+
+/// Film distance at which an RTF images infinity: rays from the on-axis film
+/// point leave parallel. Found by minimising the spread of output directions
+/// (golden-section search over the film distance).
+pub fn rtf_infinity_film_distance_mm(rtf: &Rtf, wavelength_nm: f64) -> Result<f64> {
+    let spread = |d: f64| -> f64 {
+        let Ok(cam) = RtfCamera::new(rtf.clone(), d) else {
+            return f64::INFINITY;
+        };
+        let n = 24;
+        let mut s = 0.0;
+        let mut k = 0;
+        for i in 0..n {
+            for j in 0..n {
+                let u = DVec2::new((i as f64 + 0.5) / n as f64, (j as f64 + 0.5) / n as f64);
+                if let Some(r) = cam.sample_ray(DVec2::ZERO, u, wavelength_nm) {
+                    s += r.direction.x * r.direction.x + r.direction.y * r.direction.y;
+                    k += 1;
+                }
+            }
+        }
+        if k == 0 { f64::INFINITY } else { s / k as f64 }
+    };
+    let (mut a, mut b) = (
+        rtf.plane_offset_input_mm * 0.2 + 1e-6,
+        rtf.plane_offset_input_mm * 3.0 + 1.0,
+    );
+    let g = 0.5 * (5f64.sqrt() - 1.0);
+    for _ in 0..80 {
+        let c = b - g * (b - a);
+        let d = a + g * (b - a);
+        if spread(c) < spread(d) { b = d } else { a = c }
+    }
+    let d = 0.5 * (a + b);
+    if !spread(d).is_finite() {
+        return Err(Error::Invalid(format!(
+            "RTF '{}': no film distance lets on-axis rays through",
+            rtf.name
+        )));
+    }
+    Ok(d)
+}
+
+/// Mean weight at a film point (= E/L for a uniform field), n×n grid.
+pub fn irradiance_factor(cam: &dyn Camera, film_m: DVec2, wavelength_nm: f64, n: usize) -> f64 {
+    let mut s = 0.0;
+    for i in 0..n {
+        for j in 0..n {
+            let u = DVec2::new((i as f64 + 0.5) / n as f64, (j as f64 + 0.5) / n as f64);
+            if let Some(r) = cam.sample_ray(film_m, u, wavelength_nm) {
+                s += r.weight;
+            }
+        }
+    }
+    s / (n * n) as f64
+}
+
+/// Relative illumination of a uniform Lambertian field at infinity (every
+/// ray sees the same radiance) at film heights along +y, normalised on axis.
+pub fn relative_illumination(
+    cam: &dyn Camera,
+    field_heights_mm: &[f64],
+    wavelength_nm: f64,
+    n: usize,
+) -> Result<Vec<f64>> {
+    let e0 = irradiance_factor(cam, DVec2::ZERO, wavelength_nm, n);
+    if !(e0 > 0.0) {
+        return Err(Error::Invalid("no light reaches the film on axis".into()));
+    }
+    Ok(field_heights_mm
+        .par_iter()
+        .map(|&h| irradiance_factor(cam, DVec2::new(0.0, h * 1e-3), wavelength_nm, n) / e0)
+        .collect())
+}
+
+/// Geometric ESF/LSF of a straight edge (parallel to y) in the plane
+/// `object_z_mm` (camera space, film at 0), imaged around film height
+/// `field_mm` on +x. The edge passes through the weighted centroid of the
+/// rays from the film point (field, 0), so position 0 is the edge image.
+/// ESF(x) = fraction of the light reaching film point x that comes from the
+/// bright side; LSF = dESF/dx by central differences, normalised to peak 1.
+/// Returns (esf, lsf) per position (µm).
+pub fn edge_spread(
+    cam: &dyn Camera,
+    object_z_mm: f64,
+    field_mm: f64,
+    positions_um: &[f64],
+    wavelength_nm: f64,
+    n: usize,
+) -> Result<Vec<(f64, f64)>> {
+    let z_obj = object_z_mm * 1e-3;
+    let hits = |x_mm: f64| -> Vec<(f64, f64)> {
+        let mut v = Vec::with_capacity(n * n);
+        for i in 0..n {
+            for j in 0..n {
+                let u = DVec2::new((i as f64 + 0.5) / n as f64, (j as f64 + 0.5) / n as f64);
+                if let Some(r) = cam.sample_ray(DVec2::new(x_mm * 1e-3, 0.0), u, wavelength_nm)
+                    && r.direction.z > 0.0
+                {
+                    let t = (z_obj - r.origin.z) / r.direction.z;
+                    if t > 0.0 {
+                        v.push((r.origin.x + r.direction.x * t, r.weight));
+                    }
+                }
+            }
+        }
+        v
+    };
+    let h0 = hits(field_mm);
+    let wsum: f64 = h0.iter().map(|h| h.1).sum();
+    if !(wsum > 0.0) {
+        return Err(Error::Invalid(format!(
+            "no light reaches film height {field_mm} mm"
+        )));
+    }
+    let x_edge = h0.iter().map(|h| h.0 * h.1).sum::<f64>() / wsum;
+    let esf: Vec<f64> = positions_um
+        .par_iter()
+        .map(|&p| {
+            let h = hits(field_mm + p * 1e-3);
+            let all: f64 = h.iter().map(|h| h.1).sum();
+            let bright: f64 = h.iter().filter(|h| h.0 > x_edge).map(|h| h.1).sum();
+            if all > 0.0 { bright / all } else { f64::NAN }
+        })
+        .collect();
+    let m = esf.len();
+    let mut lsf: Vec<f64> = (0..m)
+        .map(|k| {
+            let (a, b) = (k.saturating_sub(1), (k + 1).min(m - 1));
+            if b > a {
+                (esf[b] - esf[a]) / (positions_um[b] - positions_um[a])
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let peak = lsf.iter().cloned().fold(0.0, f64::max);
+    if peak > 0.0 {
+        lsf.iter_mut().for_each(|v| *v /= peak);
+    }
+    Ok(esf.into_iter().zip(lsf).collect())
+}
+
+/// Half-width (µm) of the film region an object point at `object_z_mm`
+/// spreads over around film height `field_mm` (for choosing ESF positions).
+pub fn blur_half_width_um(
+    cam: &dyn Camera,
+    object_z_mm: f64,
+    field_mm: f64,
+    wavelength_nm: f64,
+) -> f64 {
+    let z_obj = object_z_mm * 1e-3;
+    let spot = |x_mm: f64| -> Option<(f64, f64)> {
+        let n = 32;
+        let (mut lo, mut hi, mut c, mut w) = (f64::INFINITY, f64::NEG_INFINITY, 0.0, 0.0);
+        for i in 0..n {
+            for j in 0..n {
+                let u = DVec2::new((i as f64 + 0.5) / n as f64, (j as f64 + 0.5) / n as f64);
+                if let Some(r) = cam.sample_ray(DVec2::new(x_mm * 1e-3, 0.0), u, wavelength_nm) {
+                    let t = (z_obj - r.origin.z) / r.direction.z;
+                    let x = r.origin.x + r.direction.x * t;
+                    lo = lo.min(x);
+                    hi = hi.max(x);
+                    c += x * r.weight;
+                    w += r.weight;
+                }
+            }
+        }
+        (w > 0.0).then(|| (c / w, 0.5 * (hi - lo)))
+    };
+    let dx = 0.01;
+    match (spot(field_mm), spot(field_mm + dx)) {
+        (Some((c0, half)), Some((c1, _))) => {
+            let mag = ((c1 - c0) / (dx * 1e-3)).abs(); // object metres per film metre
+            if mag > 0.0 { half / mag * 1e6 } else { 10.0 }
+        }
+        _ => 10.0,
+    }
+}
+
+/// First-order summary of a lens for `camsim lens info` (mm).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LensInfo {
+    pub focal_length_mm: f64,
+    pub f_number: f64,
+    /// Exit pupil position measured from the film at the infinity-focus film distance.
+    pub exit_pupil_from_film_mm: f64,
+    pub exit_pupil_radius_mm: f64,
+    pub film_distance_infinity_mm: f64,
+    /// Working f-number from the measured on-axis irradiance, E = πL/(4N²).
+    pub working_f_number: f64,
+}
+
+/// Lens summary. Prescriptions: paraxial. RTFs: focal length from the output
+/// angle of a small off-axis film point at infinity focus (f = h/tan θ),
+/// exit pupil = on-axis pass ellipse, f-number = working f-number.
+pub fn lens_info(lens: &LensFile, wavelength_nm: f64) -> Result<LensInfo> {
+    let cam = lens_camera(lens.clone(), None, None, wavelength_nm)?;
+    let e0 = irradiance_factor(cam.camera(), DVec2::ZERO, wavelength_nm, 200);
+    let working = (std::f64::consts::PI / (4.0 * e0)).sqrt();
+    let d = cam.film_distance_mm();
+    match (lens, &cam) {
+        (LensFile::Prescription(p), _) => {
+            let px = p.paraxial(wavelength_nm)?;
+            Ok(LensInfo {
+                focal_length_mm: px.effective_focal_length_mm,
+                f_number: px.f_number,
+                exit_pupil_from_film_mm: d - px.exit_pupil_from_rear_mm,
+                exit_pupil_radius_mm: px.exit_pupil_radius_mm,
+                film_distance_infinity_mm: d,
+                working_f_number: working,
+            })
+        }
+        (LensFile::Rtf(r), LensCamera::Rtf(c)) => {
+            let w = &r.waves[0];
+            let [x0, x1, y0, y1] = w.pass.bbox(0.0).unwrap_or([0.0; 4]);
+            let (rx, ry) = (0.5 * (x1 - x0), 0.5 * (y1 - y0));
+            // Focal length: chief-ray-like average output angle from a film point h.
+            let h = 0.05 * w.pass.max_radius_mm().unwrap_or(d);
+            let n = 32;
+            let (mut sx, mut k) = (0.0, 0);
+            for i in 0..n {
+                for j in 0..n {
+                    let u = DVec2::new((i as f64 + 0.5) / n as f64, (j as f64 + 0.5) / n as f64);
+                    if let Some(ray) = c.sample_ray(DVec2::new(0.0, h * 1e-3), u, wavelength_nm) {
+                        sx += ray.direction.y / ray.direction.z;
+                        k += 1;
+                    }
+                }
+            }
+            let f = if k > 0 { h / (sx / k as f64) } else { f64::NAN };
+            Ok(LensInfo {
+                focal_length_mm: f,
+                f_number: working,
+                exit_pupil_from_film_mm: c.input_plane_z_mm() + w.pass.plane_distance_mm(),
+                exit_pupil_radius_mm: (rx * ry).sqrt(),
+                film_distance_infinity_mm: d,
+                working_f_number: working,
+            })
+        }
+        _ => unreachable!("lens_camera keeps the lens kind"),
+    }
+}

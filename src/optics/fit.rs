@@ -1,0 +1,798 @@
+//! Fitting a ray-transfer function (RTF) to a lens prescription used as a
+//! black box (paper III-B; Goossens et al. 2022).
+//!
+//! Planes (mm): the input plane lies `planeoffsetinput` = max(0.98 × back
+//! focal distance, rear-surface sag towards the film + 1 % of f) behind the
+//! rear vertex, the
+//! output plane `planeoffsetoutput` = (sag of the front surface towards the
+//! scene, if any) + 1 % of f beyond the front vertex. `outz` is written as the
+//! constant input-to-output-plane distance (see `rtf.rs` for the convention).
+//!
+//! Data: input points (0, r) on the input plane for field radii r from 0 to
+//! the last radius where light passes; for each, directions aimed at a polar
+//! grid (area-uniform in ρ, uniform in angle) filling the pass region on the
+//! pass plane; every ray is traced through the prescription and, when it
+//! reaches the scene, propagated to the output plane.
+//!
+//! Least squares: all monomials r^i·dx^j·dy^k with i+j+k ≤ N, in scaled
+//! variables (r/r_max, dx/s, dy/s with s the largest |dx|,|dy|), columns
+//! normalised to unit length, solved by Householder QR with column pivoting
+//! (columns whose pivot falls below 1e-13 of the first are dropped, i.e. get
+//! coefficient 0, and counted). The 2-norm condition number of the kept
+//! block is estimated by power iteration on R and on R⁻¹; residuals are
+//! re-evaluated from the written (unscaled) coefficients.
+//!
+//! Pass/no-pass: the pass plane is the paraxial exit pupil (distance from the
+//! input plane; the rear-vertex plane if the pupil is not behind the input
+//! plane's front side). At each field radius the boundary of the passing
+//! region is located by bisection along 96 directions from the centroid of a
+//! coarse passing grid; the minimum-area enclosing ellipse of those boundary
+//! points (mirrored in x, so it is axis-aligned) is found with Khachiyan's
+//! algorithm and scaled to contain every point. Radii beyond the last
+//! radius that passes any light get no ellipse (the RTF camera blocks them).
+
+// `!(x > 0.0)` is used on purpose: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+use super::prescription::Prescription;
+use super::rtf::{Ellipses, PassNoPass, Poly, Rtf, RtfWave};
+use crate::{Error, Result};
+use glam::{DVec2, DVec3};
+use rayon::prelude::*;
+
+/// Fitting options.
+#[derive(Clone, Debug)]
+pub struct FitOptions {
+    pub degree: usize,
+    /// Field radii for the polynomial data.
+    pub n_field: usize,
+    /// Radial × angular pupil grid per field radius.
+    pub n_rho: usize,
+    pub n_theta: usize,
+    /// Field radii with an ellipse (or used to fit the circles).
+    pub n_ellipses: usize,
+    pub pass_method: PassMethod,
+}
+
+/// Pass/no-pass representation written by the fit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PassMethod {
+    /// Minimum-area enclosing ellipse per field radius (the paper's files).
+    Ellipses,
+    /// Per field radius, the axis-aligned ellipse with the pass region's
+    /// radial extent and area (preserves the transmitted flux where the
+    /// region is a vignetted "cat's eye", which the enclosing ellipse
+    /// overestimates).
+    AreaEllipses,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        Self {
+            degree: 5,
+            n_field: 24,
+            n_rho: 8,
+            n_theta: 24,
+            n_ellipses: 25,
+            pass_method: PassMethod::Ellipses,
+        }
+    }
+}
+
+/// Fit quality of one output polynomial.
+#[derive(Clone, Debug)]
+pub struct FitReport {
+    pub wavelength_nm: f64,
+    pub output: String,
+    pub degree: usize,
+    pub n_terms: usize,
+    pub n_samples: usize,
+    /// Dropped (rank-deficient) columns.
+    pub n_dropped: usize,
+    pub condition_number: f64,
+    pub rms_residual: f64,
+    pub max_residual: f64,
+}
+
+/// Least-squares solution of A x ≈ b_k for several right-hand sides.
+pub struct LstsqSolution {
+    pub x: Vec<Vec<f64>>,
+    pub rank: usize,
+    pub condition_number: f64,
+}
+
+/// Householder QR with column pivoting. `cols` is column-major (cols[j][i]),
+/// m rows; each `rhs[k]` has m entries.
+pub fn lstsq_qr(mut cols: Vec<Vec<f64>>, mut rhs: Vec<Vec<f64>>) -> Result<LstsqSolution> {
+    let n = cols.len();
+    let m = cols.first().map_or(0, |c| c.len());
+    if m < n || n == 0 {
+        return Err(Error::Invalid(format!(
+            "least squares: {m} samples for {n} unknowns"
+        )));
+    }
+    if cols
+        .iter()
+        .flatten()
+        .chain(rhs.iter().flatten())
+        .any(|v| !v.is_finite())
+    {
+        return Err(Error::Invalid("least squares: non-finite input".into()));
+    }
+    let mut perm: Vec<usize> = (0..n).collect();
+    let mut rank = n;
+    let mut r00 = 0.0;
+    for k in 0..n {
+        // Pivot on the largest remaining column norm.
+        let norms: Vec<f64> = (k..n)
+            .map(|j| cols[j][k..].iter().map(|v| v * v).sum::<f64>())
+            .collect();
+        let (pj, &pn) = norms
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(b.1))
+            .unwrap();
+        let p = k + pj;
+        cols.swap(k, p);
+        perm.swap(k, p);
+        let norm = pn.sqrt();
+        if k == 0 {
+            r00 = norm;
+        }
+        if !(norm > 1e-13 * r00) {
+            rank = k;
+            break;
+        }
+        let alpha = if cols[k][k] > 0.0 { -norm } else { norm };
+        let mut v: Vec<f64> = cols[k][k..].to_vec();
+        v[0] -= alpha;
+        let vn2: f64 = v.iter().map(|x| x * x).sum();
+        cols[k][k] = alpha;
+        for x in cols[k][k + 1..].iter_mut() {
+            *x = 0.0;
+        }
+        if vn2 == 0.0 {
+            continue;
+        }
+        let apply = |c: &mut [f64]| {
+            let s: f64 = c.iter().zip(&v).map(|(a, b)| a * b).sum::<f64>() * 2.0 / vn2;
+            for (a, b) in c.iter_mut().zip(&v) {
+                *a -= s * b;
+            }
+        };
+        let (_, rest) = cols.split_at_mut(k + 1);
+        rest.par_iter_mut().for_each(|c| apply(&mut c[k..]));
+        for b in rhs.iter_mut() {
+            apply(&mut b[k..]);
+        }
+    }
+    let rr = |i: usize, j: usize| cols[j][i];
+    let solve_r = |b: &[f64]| -> Vec<f64> {
+        let mut x = vec![0.0; rank];
+        for i in (0..rank).rev() {
+            let s: f64 = (i + 1..rank).map(|j| rr(i, j) * x[j]).sum();
+            x[i] = (b[i] - s) / rr(i, i);
+        }
+        x
+    };
+    let solve_rt = |b: &[f64]| -> Vec<f64> {
+        let mut x = vec![0.0; rank];
+        for i in 0..rank {
+            let s: f64 = (0..i).map(|j| rr(j, i) * x[j]).sum();
+            x[i] = (b[i] - s) / rr(i, i);
+        }
+        x
+    };
+    let x = rhs
+        .iter()
+        .map(|b| {
+            let xs = solve_r(&b[..rank]);
+            let mut out = vec![0.0; n];
+            for (i, v) in xs.into_iter().enumerate() {
+                out[perm[i]] = v;
+            }
+            out
+        })
+        .collect();
+    // Condition number of the kept block: σ_max by power iteration on RᵀR,
+    // σ_min by inverse iteration (two triangular solves per step).
+    let mul_r = |v: &[f64]| {
+        (0..rank)
+            .map(|i| (i..rank).map(|j| rr(i, j) * v[j]).sum::<f64>())
+            .collect::<Vec<_>>()
+    };
+    let mul_rt = |v: &[f64]| {
+        (0..rank)
+            .map(|i| (0..=i).map(|j| rr(j, i) * v[j]).sum::<f64>())
+            .collect::<Vec<_>>()
+    };
+    let unit = |v: Vec<f64>| {
+        let n = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        (v.iter().map(|x| x / n).collect::<Vec<_>>(), n)
+    };
+    let start: Vec<f64> = (0..rank).map(|i| 1.0 + 0.1 * (i as f64).sin()).collect();
+    let (mut v, _) = unit(start.clone());
+    let mut smax2 = 0.0;
+    for _ in 0..60 {
+        let (w, n) = unit(mul_rt(&mul_r(&v)));
+        v = w;
+        smax2 = n;
+    }
+    let (mut v, _) = unit(start);
+    let mut inv2 = 0.0;
+    for _ in 0..60 {
+        let (w, n) = unit(solve_r(&solve_rt(&v)));
+        v = w;
+        inv2 = n;
+    }
+    let cond = (smax2 * inv2).sqrt();
+    Ok(LstsqSolution {
+        x,
+        rank,
+        condition_number: if cond.is_finite() { cond } else { f64::MAX },
+    })
+}
+
+/// Minimum-area enclosing ellipse (Khachiyan). Returns (centre, A) with
+/// (p−c)ᵀA(p−c) ≤ 1 for every point (scaled to guarantee containment).
+pub fn min_area_ellipse(points: &[DVec2], tol: f64) -> Option<(DVec2, [[f64; 2]; 2])> {
+    let n = points.len();
+    if n < 3 {
+        return None;
+    }
+    let mut u = vec![1.0 / n as f64; n];
+    for _ in 0..100_000 {
+        // X = Σ u q qᵀ with q = (x, y, 1).
+        let mut x = [[0.0; 3]; 3];
+        for (p, &w) in points.iter().zip(&u) {
+            let q = [p.x, p.y, 1.0];
+            for a in 0..3 {
+                for b in 0..3 {
+                    x[a][b] += w * q[a] * q[b];
+                }
+            }
+        }
+        let xi = inv3(&x)?;
+        let (mut jmax, mut mmax) = (0, f64::NEG_INFINITY);
+        for (j, p) in points.iter().enumerate() {
+            let q = [p.x, p.y, 1.0];
+            let mut m = 0.0;
+            for a in 0..3 {
+                for b in 0..3 {
+                    m += q[a] * xi[a][b] * q[b];
+                }
+            }
+            if m > mmax {
+                mmax = m;
+                jmax = j;
+            }
+        }
+        let step = (mmax - 3.0) / (3.0 * (mmax - 1.0));
+        for w in u.iter_mut() {
+            *w *= 1.0 - step;
+        }
+        u[jmax] += step;
+        if step < tol {
+            break;
+        }
+    }
+    let c = points
+        .iter()
+        .zip(&u)
+        .fold(DVec2::ZERO, |a, (p, &w)| a + *p * w);
+    let mut s = [[0.0; 2]; 2];
+    for (p, &w) in points.iter().zip(&u) {
+        let d = *p - c;
+        s[0][0] += w * d.x * d.x;
+        s[0][1] += w * d.x * d.y;
+        s[1][1] += w * d.y * d.y;
+    }
+    s[1][0] = s[0][1];
+    let det = s[0][0] * s[1][1] - s[0][1] * s[1][0];
+    if !(det > 0.0) {
+        return None;
+    }
+    // A = (1/d)·S⁻¹ with d = 2.
+    let mut a = [
+        [s[1][1] / det / 2.0, -s[0][1] / det / 2.0],
+        [-s[1][0] / det / 2.0, s[0][0] / det / 2.0],
+    ];
+    let q = |p: &DVec2| {
+        let d = *p - c;
+        a[0][0] * d.x * d.x + 2.0 * a[0][1] * d.x * d.y + a[1][1] * d.y * d.y
+    };
+    let worst = points.iter().map(q).fold(0.0, f64::max);
+    if worst > 1.0 {
+        for row in a.iter_mut() {
+            for v in row.iter_mut() {
+                *v /= worst;
+            }
+        }
+    }
+    Some((c, a))
+}
+
+fn inv3(m: &[[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
+    let c =
+        |r0: usize, r1: usize, c0: usize, c1: usize| m[r0][c0] * m[r1][c1] - m[r0][c1] * m[r1][c0];
+    let cof = [
+        [c(1, 2, 1, 2), -c(1, 2, 0, 2), c(1, 2, 0, 1)],
+        [-c(0, 2, 1, 2), c(0, 2, 0, 2), -c(0, 2, 0, 1)],
+        [c(0, 1, 1, 2), -c(0, 1, 0, 2), c(0, 1, 0, 1)],
+    ];
+    let det = m[0][0] * cof[0][0] + m[0][1] * cof[0][1] + m[0][2] * cof[0][2];
+    if !(det.abs() > 1e-300) {
+        return None;
+    }
+    let mut inv = [[0.0; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            inv[i][j] = cof[j][i] / det;
+        }
+    }
+    Some(inv)
+}
+
+/// Axis-aligned ellipse with the region's radial (y) extent and its area:
+/// cy, ry from the extreme y of the boundary, rx = area/(π·ry), cx = 0. The
+/// boundary points come in angular order around an interior point as pairs
+/// (p, mirrored p); the even ones form a star-shaped polygon (shoelace area).
+pub fn area_matched_ellipse(pts: &[DVec2]) -> Option<(DVec2, [f64; 2])> {
+    let poly: Vec<DVec2> = pts.iter().step_by(2).copied().collect();
+    let n = poly.len();
+    if n < 3 {
+        return None;
+    }
+    let area = 0.5
+        * (0..n)
+            .map(|i| poly[i].perp_dot(poly[(i + 1) % n]))
+            .sum::<f64>()
+            .abs();
+    let ymin = pts.iter().map(|p| p.y).fold(f64::INFINITY, f64::min);
+    let ymax = pts.iter().map(|p| p.y).fold(f64::NEG_INFINITY, f64::max);
+    let ry = 0.5 * (ymax - ymin);
+    if !(ry > 0.0 && area > 0.0) {
+        return None;
+    }
+    Some((
+        DVec2::new(0.0, 0.5 * (ymin + ymax)),
+        [area / (std::f64::consts::PI * ry), ry],
+    ))
+}
+
+/// Monomial exponents of total degree ≤ N, ordered by degree.
+pub fn monomials(degree: usize) -> Vec<[u32; 3]> {
+    let mut t = Vec::new();
+    for d in 0..=degree as u32 {
+        for i in (0..=d).rev() {
+            for j in (0..=d - i).rev() {
+                t.push([i, j, d - i - j]);
+            }
+        }
+    }
+    t
+}
+
+/// The black box: a prescription between an input and an output plane.
+struct BlackBox<'a> {
+    lens: &'a Prescription,
+    wavelength_nm: f64,
+    /// Input plane z in the lens frame (rear vertex at 0): −planeoffsetinput.
+    z_in: f64,
+    z_out: f64,
+    pass_distance: f64,
+}
+
+impl BlackBox<'_> {
+    /// Trace a ray from input point (0, r) (rotated frame) towards the
+    /// pass-plane point (px, py). Returns input (r, dx, dy) and outputs.
+    fn trace(&self, r: f64, px: f64, py: f64) -> Option<([f64; 3], [f64; 5])> {
+        let o = DVec3::new(0.0, r, self.z_in);
+        let d = (DVec3::new(px, py, self.z_in + self.pass_distance) - o).normalize();
+        let (p, dir) = self.lens.trace_to_scene(o, d, self.wavelength_nm).ok()?;
+        let t = (self.z_out - p.z) / dir.z;
+        if !(t >= -1e-9) {
+            return None;
+        }
+        let q = p + dir * t;
+        Some(([r, d.x, d.y], [q.x, q.y, dir.x, dir.y, dir.z]))
+    }
+    fn passes(&self, r: f64, p: DVec2) -> bool {
+        self.trace(r, p.x, p.y).is_some()
+    }
+}
+
+/// Sag of surface `s` at its rim towards +z (scene) and −z (film), mm.
+fn rim_sag(radius: f64, semi: f64) -> f64 {
+    if radius == 0.0 {
+        0.0
+    } else {
+        radius.abs() - (radius * radius - semi * semi).max(0.0).sqrt()
+    }
+}
+
+/// Fit an RTF to `lens` at each wavelength; returns the RTF and per-output reports.
+pub fn fit_rtf(
+    lens: &Prescription,
+    wavelengths_nm: &[f64],
+    opts: &FitOptions,
+) -> Result<(Rtf, Vec<FitReport>)> {
+    fit_rtf_degrees(lens, wavelengths_nm, &[opts.degree], opts)?
+        .pop()
+        .ok_or_else(|| Error::Invalid("no fit".into()))
+}
+
+/// Fit RTFs of several degrees from one set of traced data (`opts.degree`
+/// is ignored); one (RTF, reports) per degree, in order.
+pub fn fit_rtf_degrees(
+    lens: &Prescription,
+    wavelengths_nm: &[f64],
+    degrees: &[usize],
+    opts: &FitOptions,
+) -> Result<Vec<(Rtf, Vec<FitReport>)>> {
+    if let Some(d) = degrees.iter().find(|&&d| d > 24) {
+        return Err(Error::Invalid(format!(
+            "RTF degree {d} is above the supported 24"
+        )));
+    }
+    if wavelengths_nm.is_empty() || wavelengths_nm.iter().any(|w| !(w.is_finite() && *w > 0.0)) {
+        return Err(Error::Invalid(
+            "fit-rtf: wavelengths must be positive numbers (nm)".into(),
+        ));
+    }
+    let px = lens.paraxial(wavelengths_nm[0])?;
+    let f = px.effective_focal_length_mm.abs();
+    let first = &lens.surfaces[0];
+    let last = lens.surfaces.last().unwrap();
+    // Rear surface bulging towards the film: radius > 0 (centre on the film side).
+    let rear_sag = if last.radius_mm > 0.0 {
+        rim_sag(last.radius_mm, last.semi_aperture_mm)
+    } else {
+        0.0
+    };
+    let front_sag = if first.radius_mm < 0.0 {
+        rim_sag(first.radius_mm, first.semi_aperture_mm)
+    } else {
+        0.0
+    };
+    // Input plane just in front of the infinity-focus film plane (as in the
+    // Pixel 4a file): each input point then is (nearly) a film point, and the
+    // pass region is that film point's vignetted pupil, which an ellipse fits
+    // far better than the half-plane cuts the rear rim makes close to the lens.
+    let offset_in = (0.98 * px.back_focal_distance_mm).max(rear_sag + 0.01 * f);
+    let offset_out = front_sag + 0.01 * f;
+    let track = lens.total_track_mm();
+    let mut per_degree: Vec<(Vec<RtfWave>, Vec<FitReport>)> =
+        degrees.iter().map(|_| (Vec::new(), Vec::new())).collect();
+    for &wl in wavelengths_nm {
+        let pxw = lens.paraxial(wl)?;
+        let xp = -pxw.exit_pupil_from_rear_mm; // lens-frame z of the exit pupil
+        let mut pass_distance = xp + offset_in;
+        if !(pass_distance > 0.05 * f) {
+            pass_distance = offset_in;
+        }
+        let bb = BlackBox {
+            lens,
+            wavelength_nm: wl,
+            z_in: -offset_in,
+            z_out: track + offset_out,
+            pass_distance,
+        };
+        // The pass region lies near the exit pupil on the pass plane: search a
+        // square of half-width 3·(exit pupil radius) around the axis.
+        let half = 3.0 * pxw.exit_pupil_radius_mm.max(1e-6);
+        let grid_pass = |r: f64, ng: usize| -> Option<DVec2> {
+            let (mut c, mut k) = (DVec2::ZERO, 0);
+            for i in 0..ng {
+                for j in 0..ng {
+                    let q = DVec2::new(
+                        -half + 2.0 * half * (i as f64 + 0.5) / ng as f64,
+                        -half + 2.0 * half * (j as f64 + 0.5) / ng as f64,
+                    );
+                    if bb.passes(r, q) {
+                        c += q;
+                        k += 1;
+                    }
+                }
+            }
+            (k > 0).then(|| c / k as f64)
+        };
+        // Last input radius that passes light: scan, then bisect.
+        let step = 0.02 * f;
+        let mut r_pass = 0.0;
+        let mut misses = 0;
+        let mut r = 0.0;
+        while r < 5.0 * f && misses < 10 {
+            if grid_pass(r, 24).is_some() {
+                r_pass = r;
+                misses = 0;
+            } else {
+                misses += 1;
+            }
+            r += step;
+        }
+        let (mut lo, mut hi) = (r_pass, r_pass + step);
+        for _ in 0..16 {
+            let mid = 0.5 * (lo + hi);
+            if grid_pass(mid, 48).is_some() {
+                lo = mid
+            } else {
+                hi = mid
+            }
+        }
+        let r_end = lo;
+        let region = |r: f64| -> Option<(DVec2, f64)> { grid_pass(r, 48).map(|c| (c, half)) };
+        // Boundary points of the pass region at radius r.
+        let boundary = |r: f64| -> Option<Vec<DVec2>> {
+            let (centre, half) = region(r)?;
+            let c = DVec2::new(0.0, centre.y);
+            if !bb.passes(r, c) {
+                return None;
+            }
+            let na = 64;
+            let mut pts = Vec::with_capacity(2 * na);
+            for a in 0..na {
+                let th = std::f64::consts::TAU * (a as f64 + 0.5) / na as f64;
+                let dir = DVec2::new(th.cos(), th.sin());
+                let (mut lo, mut hi) = (0.0, 4.0 * half);
+                for _ in 0..30 {
+                    let mid = 0.5 * (lo + hi);
+                    if bb.passes(r, c + dir * mid) {
+                        lo = mid
+                    } else {
+                        hi = mid
+                    }
+                }
+                let p = c + dir * lo;
+                pts.push(p);
+                pts.push(DVec2::new(-p.x, p.y));
+            }
+            Some(pts)
+        };
+        // Boundaries of the pass region per field radius.
+        let radii: Vec<f64> = (0..opts.n_ellipses)
+            .map(|k| r_end * k as f64 / (opts.n_ellipses - 1) as f64)
+            .collect();
+        let bounds: Vec<Option<Vec<DVec2>>> = radii.par_iter().map(|&r| boundary(r)).collect();
+        let n_ok = bounds.iter().take_while(|e| e.is_some()).count();
+        if n_ok < 4 {
+            return Err(Error::Invalid(format!(
+                "lens '{}': fewer than four field radii pass light",
+                lens.name
+            )));
+        }
+        let bounds: Vec<Vec<DVec2>> = bounds.into_iter().take(n_ok).map(|b| b.unwrap()).collect();
+        let radii = &radii[..n_ok];
+        let ellipses = || -> Result<PassNoPass> {
+            let ell: Vec<(DVec2, [f64; 2])> = bounds
+                .par_iter()
+                .map(|pts| {
+                    if opts.pass_method == PassMethod::AreaEllipses {
+                        return area_matched_ellipse(pts);
+                    }
+                    let (c, a) = min_area_ellipse(pts, 1e-7)?;
+                    let det = a[0][0] * a[1][1] - a[0][1] * a[1][0];
+                    // Half-widths of the bounding box: sqrt of the diagonal of A⁻¹.
+                    Some((c, [(a[1][1] / det).sqrt(), (a[0][0] / det).sqrt()]))
+                })
+                .collect::<Option<Vec<_>>>()
+                .ok_or_else(|| {
+                    Error::Invalid(format!("lens '{}': degenerate pass region", lens.name))
+                })?;
+            Ok(PassNoPass::Ellipses(Ellipses {
+                positions_mm: radii.to_vec(),
+                radii_x_mm: ell.iter().map(|e| e.1[0]).collect(),
+                radii_y_mm: ell.iter().map(|e| e.1[1]).collect(),
+                centers_x_mm: ell.iter().map(|e| e.0.x).collect(),
+                centers_y_mm: ell.iter().map(|e| e.0.y).collect(),
+                plane_distance_mm: pass_distance,
+            }))
+        };
+        let pass = ellipses()?;
+        let r_last = radii[n_ok - 1];
+        // Polynomial data: polar grid inside each field's ellipse.
+        let fields: Vec<f64> = (0..opts.n_field)
+            .map(|k| r_last * k as f64 / (opts.n_field - 1) as f64)
+            .collect();
+        let data: Vec<([f64; 3], [f64; 5])> = fields
+            .par_iter()
+            .flat_map_iter(|&r| {
+                let [x0, x1, y0, y1] = pass.bbox(r).unwrap_or([0.0; 4]);
+                let (cx, cy, rx, ry) = (
+                    0.5 * (x0 + x1),
+                    0.5 * (y0 + y1),
+                    0.5 * (x1 - x0),
+                    0.5 * (y1 - y0),
+                );
+                let mut v = Vec::new();
+                for i in 0..opts.n_rho {
+                    let rho = ((i as f64 + 0.5) / opts.n_rho as f64).sqrt();
+                    for j in 0..opts.n_theta {
+                        let th = std::f64::consts::TAU * (j as f64 + 0.25 * (i % 4) as f64)
+                            / opts.n_theta as f64;
+                        if let Some(s) =
+                            bb.trace(r, cx + rho * rx * th.cos(), cy + rho * ry * th.sin())
+                        {
+                            v.push(s);
+                        }
+                    }
+                }
+                v
+            })
+            .collect();
+        for (di, &degree) in degrees.iter().enumerate() {
+            let (waves, reports) = &mut per_degree[di];
+            let terms = monomials(degree);
+            if data.len() < 2 * terms.len() {
+                return Err(Error::Invalid(format!(
+                    "lens '{}': {} traced samples for {} monomials; use more samples or a lower degree",
+                    lens.name,
+                    data.len(),
+                    terms.len()
+                )));
+            }
+            let r_s = r_last.max(1e-9);
+            let d_s = data
+                .iter()
+                .map(|s| s.0[1].abs().max(s.0[2].abs()))
+                .fold(1e-12, f64::max);
+            let deg = degree + 1;
+            let pows = |v: f64| {
+                let mut p = vec![1.0; deg];
+                for i in 1..deg {
+                    p[i] = p[i - 1] * v;
+                }
+                p
+            };
+            let rows: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)> = data
+                .iter()
+                .map(|s| (pows(s.0[0] / r_s), pows(s.0[1] / d_s), pows(s.0[2] / d_s)))
+                .collect();
+            let mut cols: Vec<Vec<f64>> = terms
+                .iter()
+                .map(|t| {
+                    rows.iter()
+                        .map(|(a, b, c)| a[t[0] as usize] * b[t[1] as usize] * c[t[2] as usize])
+                        .collect()
+                })
+                .collect();
+            let col_norm: Vec<f64> = cols
+                .iter()
+                .map(|c| c.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-300))
+                .collect();
+            for (c, n) in cols.iter_mut().zip(&col_norm) {
+                c.iter_mut().for_each(|v| *v /= n);
+            }
+            let rhs: Vec<Vec<f64>> = (0..5)
+                .map(|k| data.iter().map(|s| s.1[k]).collect())
+                .collect();
+            let sol = lstsq_qr(cols, rhs)?;
+            let names = ["outx", "outy", "outdx", "outdy", "outdz"];
+            let slots = [0usize, 1, 3, 4, 5];
+            let mut outputs: [Option<Poly>; 6] = Default::default();
+            for (k, x) in sol.x.iter().enumerate() {
+                let coeff: Vec<f64> = terms
+                    .iter()
+                    .zip(x)
+                    .zip(&col_norm)
+                    .map(|((t, c), n)| {
+                        c / n / (r_s.powi(t[0] as i32) * d_s.powi((t[1] + t[2]) as i32))
+                    })
+                    .collect();
+                let poly = Poly {
+                    terms: terms.clone(),
+                    coeff,
+                };
+                let res: Vec<f64> = data
+                    .iter()
+                    .map(|s| poly.eval(s.0[0], s.0[1], s.0[2]) - s.1[k])
+                    .collect();
+                if res.iter().any(|v| !v.is_finite()) {
+                    return Err(Error::Invalid(format!(
+                        "lens '{}': degree-{} fit of {} is not finite",
+                        lens.name, degree, names[k]
+                    )));
+                }
+                reports.push(FitReport {
+                    wavelength_nm: wl,
+                    output: names[k].to_string(),
+                    degree,
+                    n_terms: terms.len(),
+                    n_samples: data.len(),
+                    n_dropped: terms.len() - sol.rank,
+                    condition_number: sol.condition_number,
+                    rms_residual: (res.iter().map(|v| v * v).sum::<f64>() / res.len() as f64)
+                        .sqrt(),
+                    max_residual: res.iter().map(|v| v.abs()).fold(0.0, f64::max),
+                });
+                outputs[slots[k]] = Some(poly);
+            }
+            outputs[2] = Some(Poly {
+                terms: vec![[0, 0, 0]],
+                coeff: vec![offset_in + track + offset_out],
+            });
+            waves.push(RtfWave {
+                wavelength_nm: wl,
+                outputs,
+                pass: pass.clone(),
+            });
+        }
+    }
+    Ok(degrees
+        .iter()
+        .zip(per_degree)
+        .map(|(degree, (waves, reports))| {
+            let rtf = Rtf {
+                name: format!("{}-rtf-degree{degree}", lens.name),
+                description: format!(
+                    "RTF fitted by camsim to prescription '{}', degree {degree}",
+                    lens.name
+                ),
+                thickness_mm: track,
+                plane_offset_input_mm: offset_in,
+                plane_offset_output_mm: offset_out,
+                waves,
+            };
+            (rtf, reports)
+        })
+        .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// QR least squares recovers an exact polynomial and a known condition number.
+    #[test]
+    fn qr_recovers_known_solution_and_condition() {
+        // Columns: diag-like scaled basis with known singular values 1 and 1e-3.
+        let m = 50;
+        let c0: Vec<f64> = (0..m).map(|i| if i == 0 { 1.0 } else { 0.0 }).collect();
+        let c1: Vec<f64> = (0..m).map(|i| if i == 1 { 1e-3 } else { 0.0 }).collect();
+        let b: Vec<f64> = (0..m)
+            .map(|i| {
+                if i == 0 {
+                    2.0
+                } else if i == 1 {
+                    3e-3
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let s = lstsq_qr(vec![c0, c1], vec![b]).unwrap();
+        assert!((s.x[0][0] - 2.0).abs() < 1e-12 && (s.x[0][1] - 3.0).abs() < 1e-9);
+        assert!(
+            (s.condition_number / 1e3 - 1.0).abs() < 1e-6,
+            "{}",
+            s.condition_number
+        );
+        // A cubic fitted through noiseless samples.
+        let xs: Vec<f64> = (0..40).map(|i| -1.0 + 2.0 * i as f64 / 39.0).collect();
+        let cols: Vec<Vec<f64>> = (0..4)
+            .map(|p| xs.iter().map(|x| x.powi(p)).collect())
+            .collect();
+        let y: Vec<f64> = xs.iter().map(|x| 1.0 - 2.0 * x + 0.5 * x * x * x).collect();
+        let s = lstsq_qr(cols, vec![y]).unwrap();
+        for (got, want) in s.x[0].iter().zip([1.0, -2.0, 0.0, 0.5]) {
+            assert!((got - want).abs() < 1e-12);
+        }
+    }
+
+    /// Khachiyan: points on a known ellipse give that ellipse back.
+    #[test]
+    fn min_area_ellipse_recovers_ellipse() {
+        let pts: Vec<DVec2> = (0..64)
+            .map(|k| {
+                let t = std::f64::consts::TAU * k as f64 / 64.0;
+                DVec2::new(0.3 + 2.0 * t.cos(), -1.0 + 0.5 * t.sin())
+            })
+            .collect();
+        let (c, a) = min_area_ellipse(&pts, 1e-9).unwrap();
+        assert!((c - DVec2::new(0.3, -1.0)).length() < 1e-4);
+        assert!(
+            (1.0 / a[0][0].sqrt() - 2.0).abs() < 1e-3 && (1.0 / a[1][1].sqrt() - 0.5).abs() < 1e-3
+        );
+        assert!(a[0][1].abs() < 1e-4);
+    }
+}
