@@ -5,6 +5,7 @@
 //! - [`rng`]: counter-based per-pixel random streams, exact Poisson sampling.
 
 pub mod config;
+pub mod output;
 pub mod pipeline;
 pub mod rng;
 
