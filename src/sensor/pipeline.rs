@@ -183,35 +183,70 @@ fn run(cfg: &SensorConfig, oi: &OpticalImage, seed: u64, keep: bool) -> Result<S
     let w = channel_weights(cfg, &oi.grid);
     let oiw = oi.window.w as usize;
     let irr = &oi.irradiance;
-    if irr.iter().any(|v| !v.is_finite() || *v < 0.0) {
+    let identity = xm
+        .weights
+        .iter()
+        .chain(&ym.weights)
+        .all(|v| v.len() == 1 && v[0].1 == 1.0)
+        && xm.weights.windows(2).all(|p| p[1][0].0 == p[0][0].0 + 1);
+    // Pass 1: mean electrons per second per pixel (relative illumination included).
+    let mut rate = vec![0f32; window.area() as usize];
+    let bad = if identity {
+        // Same grid: one OI pixel per sensor pixel; f32 dot products over the bands,
+        // with a finiteness/sign check folded in (sum must be finite, min ≥ 0).
+        let wf: Vec<Vec<f32>> = w
+            .iter()
+            .map(|wc| wc.iter().map(|&v| v as f32).collect())
+            .collect();
+        let x0 = xm.weights[0][0].0 as usize;
+        rate.par_chunks_mut(window.w as usize)
+            .enumerate()
+            .map(|(r, row)| {
+                let yf = window.y + r as u32;
+                let oy = ym.weights[r][0].0 as usize;
+                let mut bad = false;
+                for (cix, out) in row.iter_mut().enumerate() {
+                    let xf = window.x + cix as u32;
+                    let p = &irr[(oy * oiw + x0 + cix) * nb..][..nb];
+                    let (d, sum, mn) = dot_check(&wf[cfg.cfa.channel_at(xf, yf)], p);
+                    bad |= !(sum.is_finite() && mn >= 0.0);
+                    *out = (d as f64 * ri_at(cfg, full, xf, yf)) as f32;
+                }
+                bad
+            })
+            .reduce(|| false, |a, b| a || b)
+    } else {
+        let bad = irr
+            .par_chunks(1 << 16)
+            .any(|c| c.iter().any(|v| !(*v >= 0.0 && v.is_finite())));
+        rate.par_chunks_mut(window.w as usize)
+            .enumerate()
+            .for_each(|(r, row)| {
+                let yf = window.y + r as u32;
+                for (cix, out) in row.iter_mut().enumerate() {
+                    let xf = window.x + cix as u32;
+                    let wc = &w[cfg.cfa.channel_at(xf, yf)];
+                    let mut acc = 0.0f64;
+                    for &(iy, wy) in &ym.weights[r] {
+                        for &(ix, wx) in &xm.weights[cix] {
+                            let p = &irr[(iy as usize * oiw + ix as usize) * nb..][..nb];
+                            let mut d = 0.0f64;
+                            for b in 0..nb {
+                                d += wc[b] * p[b] as f64;
+                            }
+                            acc += wy * wx * d;
+                        }
+                    }
+                    *out = (acc * ri_at(cfg, full, xf, yf)) as f32;
+                }
+            });
+        bad
+    };
+    if bad {
         return Err(Error::invalid(
             "optical image irradiance has negative or non-finite values",
         ));
     }
-    // Pass 1: mean electrons per second per pixel (relative illumination included).
-    let mut rate = vec![0f32; window.area() as usize];
-    rate.par_chunks_mut(window.w as usize)
-        .enumerate()
-        .for_each(|(r, row)| {
-            let yf = window.y + r as u32;
-            for (cix, out) in row.iter_mut().enumerate() {
-                let xf = window.x + cix as u32;
-                let ch = cfg.cfa.channel_at(xf, yf);
-                let wc = &w[ch];
-                let mut acc = 0.0f64;
-                for &(iy, wy) in &ym.weights[r] {
-                    for &(ix, wx) in &xm.weights[cix] {
-                        let p = &irr[(iy as usize * oiw + ix as usize) * nb..][..nb];
-                        let mut d = 0.0f64;
-                        for b in 0..nb {
-                            d += wc[b] * p[b] as f64;
-                        }
-                        acc += wy * wx * d;
-                    }
-                }
-                *out = (acc * ri_at(cfg, full, xf, yf)) as f32;
-            }
-        });
     let labels = if oi.labels.len() == oi.window.area() as usize {
         let mut l = Vec::with_capacity(window.area() as usize);
         for r in 0..window.h as usize {
@@ -227,6 +262,34 @@ fn run(cfg: &SensorConfig, oi: &OpticalImage, seed: u64, keep: bool) -> Result<S
     f.image.labels = labels;
     f.image.label_names = oi.label_names.clone();
     Ok(f)
+}
+
+/// Dot product of weights and one pixel's spectrum, plus the spectrum's sum and
+/// minimum (for the input check), in eight independent f32 lanes.
+#[inline]
+fn dot_check(w: &[f32], p: &[f32]) -> (f32, f32, f32) {
+    let mut acc = [0f32; 8];
+    let mut sum = [0f32; 8];
+    let mut mn = [f32::INFINITY; 8];
+    let wc = w.chunks_exact(8);
+    let pc = p.chunks_exact(8);
+    let (wr, pr) = (wc.remainder(), pc.remainder());
+    for (a, b) in wc.zip(pc) {
+        for i in 0..8 {
+            acc[i] += a[i] * b[i];
+            sum[i] += b[i];
+            mn[i] = mn[i].min(b[i]);
+        }
+    }
+    let mut d: f32 = acc.iter().sum();
+    let mut s: f32 = sum.iter().sum();
+    let mut m = mn.iter().fold(f32::INFINITY, |a, &b| a.min(b));
+    for (a, b) in wr.iter().zip(pr) {
+        d += a * b;
+        s += b;
+        m = m.min(*b);
+    }
+    (d, s, m)
 }
 
 /// Simulate a uniform field (integrating sphere): every pixel sees the spectral

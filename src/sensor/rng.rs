@@ -3,7 +3,7 @@
 //! bit-identical for any thread count and any window of the frame.
 //!
 //! - [`PixelRng`]: SplitMix64 stream (Steele et al. 2014) started from a mixed key.
-//! - [`PixelRng::normal`]: Box–Muller, both values used.
+//! - [`PixelRng::normal`]: exact ziggurat (Marsaglia & Tsang 2000).
 //! - [`PixelRng::poisson`]: exact Poisson at every mean: sequential inversion for
 //!   μ < 10, Hörmann's PTRS transformed rejection (1993) for μ ≥ 10. No Gaussian
 //!   approximation anywhere.
@@ -29,7 +29,6 @@ fn mix64(mut z: u64) -> u64 {
 #[derive(Clone, Debug)]
 pub struct PixelRng {
     state: u64,
-    spare: Option<f64>,
 }
 
 const GAMMA: u64 = 0x9e37_79b9_7f4a_7c15;
@@ -40,10 +39,7 @@ impl PixelRng {
     pub fn new(seed: u64, source: u64, item: u64) -> Self {
         let k = mix64(seed.wrapping_add(GAMMA.wrapping_mul(source.wrapping_add(1))));
         let k = mix64(k ^ item.wrapping_mul(0xd1b5_4a32_d192_ed03));
-        Self {
-            state: k,
-            spare: None,
-        }
+        Self { state: k }
     }
     #[inline]
     pub fn next_u64(&mut self) -> u64 {
@@ -60,18 +56,34 @@ impl PixelRng {
     fn uniform_open0(&mut self) -> f64 {
         ((self.next_u64() >> 11) + 1) as f64 * (1.0 / (1u64 << 53) as f64)
     }
-    /// Standard normal (Box–Muller; the second value is kept for the next call).
+    /// Standard normal, exact, by the ziggurat method (Marsaglia & Tsang 2000;
+    /// 256 layers, f64, the layer index and the abscissa from disjoint bits).
     #[inline]
     pub fn normal(&mut self) -> f64 {
-        if let Some(z) = self.spare.take() {
-            return z;
+        let z = ziggurat();
+        loop {
+            let bits = self.next_u64();
+            let i = (bits & 0xff) as usize;
+            let u = 2.0 * ((bits >> 11) as f64 * (1.0 / (1u64 << 53) as f64)) - 1.0;
+            let x = u * z.x[i];
+            if x.abs() < z.x[i + 1] {
+                return x;
+            }
+            if i == 0 {
+                // tail beyond R (Marsaglia 1964)
+                loop {
+                    let a = -self.uniform_open0().ln() / ZIG_R;
+                    let b = -self.uniform_open0().ln();
+                    if 2.0 * b > a * a {
+                        return if u < 0.0 { -(ZIG_R + a) } else { ZIG_R + a };
+                    }
+                }
+            }
+            let y = z.f[i] + self.uniform() * (z.f[i + 1] - z.f[i]);
+            if y < (-0.5 * x * x).exp() {
+                return x;
+            }
         }
-        let u1 = self.uniform_open0();
-        let u2 = self.uniform();
-        let r = (-2.0 * u1.ln()).sqrt();
-        let (s, c) = (std::f64::consts::TAU * u2).sin_cos();
-        self.spare = Some(r * s);
-        r * c
     }
     /// Exact Poisson variate with mean `mu` (≥ 0; non-finite or negative gives 0).
     #[inline]
@@ -110,7 +122,7 @@ impl PixelRng {
         let a = -0.059 + 0.02483 * b;
         let inv_alpha = 1.1239 + 1.1328 / (b - 3.4);
         let v_r = 0.9277 - 3.6224 / (b - 2.0);
-        let log_mu = mu.ln();
+        let mut log_mu = f64::NAN; // computed on the first slow-path test only
         loop {
             let u = self.uniform() - 0.5;
             let v = self.uniform();
@@ -122,6 +134,9 @@ impl PixelRng {
             if k < 0.0 || (us < 0.013 && v > us) {
                 continue;
             }
+            if log_mu.is_nan() {
+                log_mu = mu.ln();
+            }
             let lhs = (v * inv_alpha / (a / (us * us) + b)).ln();
             let rhs = -mu + k * log_mu - ln_factorial(k);
             if lhs <= rhs {
@@ -129,6 +144,33 @@ impl PixelRng {
             }
         }
     }
+}
+
+const ZIG_N: usize = 256;
+const ZIG_R: f64 = 3.654_152_885_361_009;
+const ZIG_V: f64 = 0.004_928_673_233_99;
+
+struct Ziggurat {
+    /// Layer widths x[0] (base: V/f(R)) > x[1] = R > … > x[256] = 0.
+    x: Vec<f64>,
+    /// f(x[i]) = exp(−x[i]²/2).
+    f: Vec<f64>,
+}
+
+fn ziggurat() -> &'static Ziggurat {
+    static Z: OnceLock<Ziggurat> = OnceLock::new();
+    Z.get_or_init(|| {
+        let f = |x: f64| (-0.5 * x * x).exp();
+        let mut x = vec![0.0; ZIG_N + 1];
+        x[0] = ZIG_V / f(ZIG_R);
+        x[1] = ZIG_R;
+        for i in 2..ZIG_N {
+            x[i] = (-2.0 * (ZIG_V / x[i - 1] + f(x[i - 1])).ln()).sqrt();
+        }
+        x[ZIG_N] = 0.0;
+        let fx = x.iter().map(|&v| f(v)).collect();
+        Ziggurat { x, f: fx }
+    })
 }
 
 /// ln(k!) for integer-valued k ≥ 0: exact table below 256, Stirling series above
@@ -242,6 +284,50 @@ mod tests {
         assert!((s / nf).abs() < 5.0 / nf.sqrt());
         assert!((s2 / nf - 1.0).abs() < 5.0 * (2.0 / nf).sqrt());
         assert!((s4 / nf - 3.0).abs() < 5.0 * (96.0 / nf).sqrt());
+    }
+
+    /// Binned chi-square of the normal sampler against Φ, including both tails and the
+    /// ziggurat's base/tail boundary at 3.654.
+    #[test]
+    fn normal_is_exact_by_chi_square() {
+        let erf = |x: f64| {
+            // Abramowitz & Stegun 7.1.26, |error| < 1.5e-7
+            let t = 1.0 / (1.0 + 0.3275911 * x.abs());
+            let y = 1.0
+                - t * (0.254829592
+                    + t * (-0.284496736
+                        + t * (1.421413741 + t * (-1.453152027 + t * 1.061405429))))
+                    * (-x * x).exp();
+            if x >= 0.0 { y } else { -y }
+        };
+        let phi = |x: f64| 0.5 * (1.0 + erf(x / std::f64::consts::SQRT_2));
+        let edges: Vec<f64> = (-16..=16)
+            .map(|i| i as f64 * 0.25)
+            .chain([-3.654, 3.654])
+            .collect::<Vec<_>>();
+        let mut e = edges.clone();
+        e.sort_by(|a, b| a.total_cmp(b));
+        let n = 1_000_000usize;
+        let mut counts = vec![0.0f64; e.len() + 1];
+        let mut r = PixelRng::new(11, stream::READ, 3);
+        for _ in 0..n {
+            let z = r.normal();
+            counts[e.partition_point(|&b| b <= z)] += 1.0;
+        }
+        let mut chi2 = 0.0;
+        for k in 0..counts.len() {
+            let lo = if k == 0 { f64::NEG_INFINITY } else { e[k - 1] };
+            let hi = if k == e.len() { f64::INFINITY } else { e[k] };
+            let p = (if hi.is_finite() { phi(hi) } else { 1.0 })
+                - (if lo.is_finite() { phi(lo) } else { 0.0 });
+            let ex = p * n as f64;
+            chi2 += (counts[k] - ex).powi(2) / ex;
+        }
+        let dof = (counts.len() - 1) as f64;
+        assert!(
+            chi2 < dof + 5.0 * (2.0 * dof).sqrt(),
+            "chi2 {chi2} on {dof}"
+        );
     }
 
     #[test]
