@@ -170,8 +170,8 @@ pub struct PhotonTransfer {
     pub saturation_e: Option<Estimate>,
     /// Dark current, e⁻/s (None with fewer than two dark exposures).
     pub dark_current_e_per_s: Option<Estimate>,
-    /// Appendix III conversion gain from the brightest unclipped level, using the PRNU
-    /// measured here.
+    /// Appendix III conversion gain from the brightest level of the K fit, using the
+    /// PRNU measured here (its SE includes the PRNU estimate's SE).
     pub appendix3_dv_per_e: Option<Estimate>,
     pub levels: Vec<LevelStats>,
     /// Light levels used for the K fit (indices into `levels`).

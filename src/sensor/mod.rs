@@ -7,11 +7,13 @@
 //! - [`output`]: raw 16-bit PNG, DNG, demosaiced preview;
 //! - [`nnls`]: Lawson–Hanson NNLS and the paper's QE correction matrix (Eq. 2–3);
 //! - [`calibrate`]: Appendix III conversion gain, EMVA 1288 photon transfer;
+//! - [`flatfield`]: flat-field sequences on disk (simulate → PNG + settings.csv → read);
 //! - [`bench`]: the full-frame speed benchmark.
 
 pub mod bench;
 pub mod calibrate;
 pub mod config;
+pub mod flatfield;
 pub mod nnls;
 pub mod output;
 pub mod pipeline;
