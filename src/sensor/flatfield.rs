@@ -90,7 +90,7 @@ pub fn flat_spectrum(e: f64, spectrum: Option<&str>) -> Result<Spectrum> {
             let s = library::named(n).map_err(Error::invalid)?;
             let g = grid();
             let mean = (0..g.len()).map(|i| s.eval(g.wavelength(i))).sum::<f64>() / g.len() as f64;
-            if !(mean > 0.0) {
+            if !mean.is_finite() || mean <= 0.0 {
                 return Err(Error::invalid(format!(
                     "spectrum '{n}' is zero over 400–700 nm"
                 )));

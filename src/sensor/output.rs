@@ -148,7 +148,7 @@ pub fn dng_color(cfg: &SensorConfig) -> Option<([f64; 9], [f64; 3])> {
         .map(|r| (0..3).map(|c| m[r * 3 + c] * xyz1[c]).sum())
         .collect();
     let mx = n.iter().cloned().fold(0.0, f64::max);
-    if !(mx > 0.0) {
+    if !mx.is_finite() || mx <= 0.0 {
         return None;
     }
     for v in &mut m {
@@ -166,6 +166,7 @@ pub fn dng_color(cfg: &SensorConfig) -> Option<([f64; 9], [f64; 3])> {
     Some((m, neutral))
 }
 
+#[allow(clippy::needless_range_loop)]
 fn invert3(a: &[[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
     let det = a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1])
         - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
@@ -317,21 +318,22 @@ pub fn dng_bytes(image: &SensorImage, cfg: &SensorConfig) -> Result<Vec<u8>> {
     let ifd_len = 2 + 12 * tags.len() + 4;
     let mut extra: Vec<u8> = vec![];
     let extra_start = 8 + ifd_len;
-    let mut entries: Vec<(u16, u16, u32, [u8; 4], Option<usize>)> = vec![];
+    // (tag, type, count, inline value or offset)
+    let mut entries: Vec<(u16, u16, u32, [u8; 4])> = vec![];
     for (tag, v) in &tags {
         let (ty, count) = v.type_count();
         let b = v.bytes();
         if b.len() <= 4 {
             let mut inl = [0u8; 4];
             inl[..b.len()].copy_from_slice(&b);
-            entries.push((*tag, ty, count, inl, None));
+            entries.push((*tag, ty, count, inl));
         } else {
             if extra.len() % 2 == 1 {
                 extra.push(0);
             }
             let off = extra_start + extra.len();
             extra.extend_from_slice(&b);
-            entries.push((*tag, ty, count, (off as u32).to_le_bytes(), Some(off)));
+            entries.push((*tag, ty, count, (off as u32).to_le_bytes()));
         }
     }
     if extra.len() % 2 == 1 {
@@ -342,7 +344,7 @@ pub fn dng_bytes(image: &SensorImage, cfg: &SensorConfig) -> Result<Vec<u8>> {
     out.extend_from_slice(b"II*\0");
     out.extend_from_slice(&8u32.to_le_bytes());
     out.extend_from_slice(&(tags.len() as u16).to_le_bytes());
-    for (tag, ty, count, mut inl, _) in entries {
+    for (tag, ty, count, mut inl) in entries {
         if tag == 273 {
             inl = strip_off.to_le_bytes();
         }
