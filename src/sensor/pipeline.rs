@@ -132,7 +132,7 @@ fn check_config(cfg: &SensorConfig) -> Result<()> {
 
 /// Relative-illumination factor of full-frame pixel (x, y).
 fn ri_at(cfg: &SensorConfig, full: (u32, u32), x: u32, y: u32) -> f64 {
-    if !cfg.sources.pixel_vignetting || cfg.relative_illumination == RelativeIllumination::None {
+    if !ri_active(cfg) {
         return 1.0;
     }
     let dx = (x as f64 + 0.5 - full.0 as f64 / 2.0) * cfg.pixel_size_m;
@@ -200,18 +200,25 @@ fn run(cfg: &SensorConfig, oi: &OpticalImage, seed: u64, keep: bool) -> Result<S
             .map(|wc| wc.iter().map(|&v| v as f32).collect())
             .collect();
         let x0 = xm.weights[0][0].0 as usize;
+        let phases = channel_rows(cfg, window);
+        let use_ri = ri_active(cfg);
         rate.par_chunks_mut(window.w as usize)
             .enumerate()
             .map(|(r, row)| {
                 let yf = window.y + r as u32;
                 let oy = ym.weights[r][0].0 as usize;
+                let chans = &phases[(yf % cfg.cfa.height) as usize];
+                let base = (oy * oiw + x0) * nb;
                 let mut bad = false;
                 for (cix, out) in row.iter_mut().enumerate() {
-                    let xf = window.x + cix as u32;
-                    let p = &irr[(oy * oiw + x0 + cix) * nb..][..nb];
-                    let (d, sum, mn) = dot_check(&wf[cfg.cfa.channel_at(xf, yf)], p);
-                    bad |= !(sum.is_finite() && mn >= 0.0);
-                    *out = (d as f64 * ri_at(cfg, full, xf, yf)) as f32;
+                    let p = &irr[base + cix * nb..][..nb];
+                    let (d, ok) = dot_check(&wf[chans[cix] as usize], p);
+                    bad |= !ok;
+                    *out = if use_ri {
+                        (d as f64 * ri_at(cfg, full, window.x + cix as u32, yf)) as f32
+                    } else {
+                        d
+                    };
                 }
                 bad
             })
@@ -248,7 +255,13 @@ fn run(cfg: &SensorConfig, oi: &OpticalImage, seed: u64, keep: bool) -> Result<S
             "optical image irradiance has negative or non-finite values",
         ));
     }
-    let labels = if oi.labels.len() == oi.window.area() as usize {
+    let labels = if identity
+        && window.w == oi.window.w
+        && window.h == oi.window.h
+        && oi.labels.len() == oi.window.area() as usize
+    {
+        oi.labels.clone()
+    } else if oi.labels.len() == oi.window.area() as usize {
         let mut l = Vec::with_capacity(window.area() as usize);
         for r in 0..window.h as usize {
             for c in 0..window.w as usize {
@@ -265,13 +278,13 @@ fn run(cfg: &SensorConfig, oi: &OpticalImage, seed: u64, keep: bool) -> Result<S
     Ok(f)
 }
 
-/// Dot product of weights and one pixel's spectrum, plus the spectrum's sum and
-/// minimum (for the input check), in eight independent f32 lanes.
+/// Dot product of weights and one pixel's spectrum, and whether the spectrum is
+/// valid (finite sum, no negative value); eight independent f32 lanes.
 #[inline]
-fn dot_check(w: &[f32], p: &[f32]) -> (f32, f32, f32) {
+fn dot_check(w: &[f32], p: &[f32]) -> (f32, bool) {
     let mut acc = [0f32; 8];
     let mut sum = [0f32; 8];
-    let mut mn = [f32::INFINITY; 8];
+    let mut neg = [false; 8];
     let wc = w.chunks_exact(8);
     let pc = p.chunks_exact(8);
     let (wr, pr) = (wc.remainder(), pc.remainder());
@@ -279,18 +292,33 @@ fn dot_check(w: &[f32], p: &[f32]) -> (f32, f32, f32) {
         for i in 0..8 {
             acc[i] += a[i] * b[i];
             sum[i] += b[i];
-            mn[i] = mn[i].min(b[i]);
+            neg[i] |= b[i] < 0.0;
         }
     }
     let mut d: f32 = acc.iter().sum();
     let mut s: f32 = sum.iter().sum();
-    let mut m = mn.iter().fold(f32::INFINITY, |a, &b| a.min(b));
+    let mut n = neg.iter().any(|&x| x);
     for (a, b) in wr.iter().zip(pr) {
         d += a * b;
         s += b;
-        m = m.min(*b);
+        n |= *b < 0.0;
     }
-    (d, s, m)
+    (d, s.is_finite() && !n)
+}
+
+/// Channel index per window column, for each CFA row phase.
+fn channel_rows(cfg: &SensorConfig, window: Rect) -> Vec<Vec<u8>> {
+    (0..cfg.cfa.height)
+        .map(|py| {
+            (0..window.w)
+                .map(|c| cfg.cfa.channel_at(window.x + c, py) as u8)
+                .collect()
+        })
+        .collect()
+}
+
+fn ri_active(cfg: &SensorConfig) -> bool {
+    cfg.sources.pixel_vignetting && cfg.relative_illumination != RelativeIllumination::None
 }
 
 /// Simulate a uniform field (integrating sphere): every pixel sees the spectral

@@ -120,15 +120,17 @@ impl PixelRng {
         let smu = mu.sqrt();
         let b = 0.931 + 2.53 * smu;
         let a = -0.059 + 0.02483 * b;
-        let inv_alpha = 1.1239 + 1.1328 / (b - 3.4);
-        let v_r = 0.9277 - 3.6224 / (b - 2.0);
+        // Fast acceptance v ≤ v_r = 0.9277 − 3.6224/(b − 2), multiplied out (b − 2 > 6.9
+        // for μ ≥ 10) to keep a division off the common path.
+        let bm2 = b - 2.0;
+        let v_r_num = 0.9277 * bm2 - 3.6224;
         let mut log_mu = f64::NAN; // computed on the first slow-path test only
         loop {
             let u = self.uniform() - 0.5;
             let v = self.uniform();
             let us = 0.5 - u.abs();
             let k = ((2.0 * a / us + b) * u + mu + 0.43).floor();
-            if us >= 0.07 && v <= v_r {
+            if us >= 0.07 && v * bm2 <= v_r_num {
                 return k;
             }
             if k < 0.0 || (us < 0.013 && v > us) {
@@ -137,6 +139,7 @@ impl PixelRng {
             if log_mu.is_nan() {
                 log_mu = mu.ln();
             }
+            let inv_alpha = 1.1239 + 1.1328 / (b - 3.4);
             let lhs = (v * inv_alpha / (a / (us * us) + b)).ln();
             let rhs = -mu + k * log_mu - ln_factorial(k);
             if lhs <= rhs {
