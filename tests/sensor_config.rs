@@ -44,12 +44,21 @@ fn generic_sensor_parses() {
     assert!((c.conversion_gain_v_per_e() - 100e-6).abs() < 1e-15);
 }
 
-/// data/README.md: p4a corrected filters = (nominal QE × IR cut) · M. The shipped
-/// curves are sampled on different grids (10 nm vs 1 nm), so agreement is to the
-/// resampling error; we accept 2 % of the peak QE per channel and wavelength.
+/// data/README.md: p4a corrected filters = (nominal QE × IR cut) · M. Evaluated at
+/// the 10 nm samples of the corrected file (where the 1 nm IR-cut table has exact
+/// samples), the only differences are the 4-decimal rounding of M (≤ 5e-5 × the
+/// nominal QE) and the rounding of the stored curves; we accept 1e-4 absolute.
 #[test]
 fn nominal_qe_times_ir_times_m_matches_corrected_filters() {
-    let nominal = SensorConfig::load(&root().join("sensors/imx363-nominal.kdl")).unwrap();
+    let text = std::fs::read_to_string(root().join("sensors/imx363-nominal.kdl")).unwrap()
+        + "qe-matrix {\n row 0.5636 0.0807 0.0069\n row 0 0.5917 0\n row 0 0.2470 0.7098\n}\n";
+    let nominal = SensorConfig::parse(&text, &root().join("sensors/imx363-nominal.kdl")).unwrap();
+    assert!(
+        SensorConfig::load(&root().join("sensors/imx363-nominal.kdl"))
+            .unwrap()
+            .qe_matrix
+            .is_none()
+    );
     let corrected = SensorConfig::load(&root().join("sensors/imx363.kdl")).unwrap();
     let mut peak = [0.0f64; 3];
     let mut worst = [0.0f64; 3];
@@ -62,8 +71,12 @@ fn nominal_qe_times_ir_times_m_matches_corrected_filters() {
         }
     }
     for c in 0..3 {
+        eprintln!(
+            "channel {c}: max |diff| {:.5} (peak {:.4})",
+            worst[c], peak[c]
+        );
         assert!(
-            worst[c] < 0.02 * peak[c],
+            worst[c] < 1e-4,
             "channel {c}: max |diff| {} vs peak {}",
             worst[c],
             peak[c]
