@@ -1,0 +1,352 @@
+//! Counter-based random numbers for the sensor: every pixel draws from its own
+//! stream, keyed by (seed, noise source, full-frame pixel index), so a frame is
+//! bit-identical for any thread count and any window of the frame.
+//!
+//! - [`PixelRng`]: SplitMix64 stream (Steele et al. 2014) started from a mixed key.
+//! - [`PixelRng::normal`]: exact ziggurat (Marsaglia & Tsang 2000).
+//! - [`PixelRng::poisson`]: exact Poisson at every mean: sequential inversion for
+//!   μ < 10, Hörmann's PTRS transformed rejection (1993) for μ ≥ 10. No Gaussian
+//!   approximation anywhere.
+
+use std::sync::OnceLock;
+
+/// Stream identifiers (one per noise source) so sources never share numbers.
+pub mod stream {
+    pub const PHOTON: u64 = 0x1;
+    pub const READ: u64 = 0x2;
+    pub const FPN_PIXEL: u64 = 0x3;
+    pub const FPN_COLUMN: u64 = 0x4;
+}
+
+#[inline]
+fn mix64(mut z: u64) -> u64 {
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+/// A small random stream for one (seed, source, item).
+#[derive(Clone, Debug)]
+pub struct PixelRng {
+    state: u64,
+}
+
+const GAMMA: u64 = 0x9e37_79b9_7f4a_7c15;
+
+impl PixelRng {
+    /// The stream for `item` (e.g. full-frame pixel index) of `source` under `seed`.
+    #[inline]
+    pub fn new(seed: u64, source: u64, item: u64) -> Self {
+        let k = mix64(seed.wrapping_add(GAMMA.wrapping_mul(source.wrapping_add(1))));
+        let k = mix64(k ^ item.wrapping_mul(0xd1b5_4a32_d192_ed03));
+        Self { state: k }
+    }
+    #[inline]
+    pub fn next_u64(&mut self) -> u64 {
+        self.state = self.state.wrapping_add(GAMMA);
+        mix64(self.state)
+    }
+    /// Uniform in [0, 1) with 53 random bits.
+    #[inline]
+    pub fn uniform(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+    }
+    /// Uniform in (0, 1].
+    #[inline]
+    fn uniform_open0(&mut self) -> f64 {
+        ((self.next_u64() >> 11) + 1) as f64 * (1.0 / (1u64 << 53) as f64)
+    }
+    /// Standard normal, exact, by the ziggurat method (Marsaglia & Tsang 2000;
+    /// 256 layers, f64, the layer index and the abscissa from disjoint bits).
+    #[inline]
+    pub fn normal(&mut self) -> f64 {
+        let z = ziggurat();
+        loop {
+            let bits = self.next_u64();
+            let i = (bits & 0xff) as usize;
+            let u = 2.0 * ((bits >> 11) as f64 * (1.0 / (1u64 << 53) as f64)) - 1.0;
+            let x = u * z.x[i];
+            if x.abs() < z.x[i + 1] {
+                return x;
+            }
+            if i == 0 {
+                // tail beyond R (Marsaglia 1964)
+                loop {
+                    let a = -self.uniform_open0().ln() / ZIG_R;
+                    let b = -self.uniform_open0().ln();
+                    if 2.0 * b > a * a {
+                        return if u < 0.0 { -(ZIG_R + a) } else { ZIG_R + a };
+                    }
+                }
+            }
+            let y = z.f[i] + self.uniform() * (z.f[i + 1] - z.f[i]);
+            if y < (-0.5 * x * x).exp() {
+                return x;
+            }
+        }
+    }
+    /// Exact Poisson variate with mean `mu` (≥ 0; non-finite or negative gives 0).
+    #[inline]
+    pub fn poisson(&mut self, mu: f64) -> f64 {
+        if mu.is_nan() || mu <= 0.0 {
+            return 0.0;
+        }
+        if mu < 10.0 {
+            self.poisson_inversion(mu)
+        } else {
+            self.poisson_ptrs(mu)
+        }
+    }
+    /// Sequential search inversion (exact; expected μ+1 steps).
+    fn poisson_inversion(&mut self, mu: f64) -> f64 {
+        let u = self.uniform();
+        let mut k = 0u32;
+        let mut p = (-mu).exp();
+        let mut cdf = p;
+        while u >= cdf {
+            k += 1;
+            p *= mu / k as f64;
+            cdf += p;
+            // Guard against round-off leaving cdf < u forever (p underflows to 0).
+            if p < 1e-300 && k as f64 > mu {
+                break;
+            }
+        }
+        k as f64
+    }
+    /// Hörmann (1993), "The transformed rejection method for generating Poisson
+    /// random variables", algorithm PTRS; exact for μ ≥ 10.
+    fn poisson_ptrs(&mut self, mu: f64) -> f64 {
+        let smu = mu.sqrt();
+        let b = 0.931 + 2.53 * smu;
+        let a = -0.059 + 0.02483 * b;
+        // Fast acceptance v ≤ v_r = 0.9277 − 3.6224/(b − 2), multiplied out (b − 2 > 6.9
+        // for μ ≥ 10) to keep a division off the common path.
+        let bm2 = b - 2.0;
+        let v_r_num = 0.9277 * bm2 - 3.6224;
+        let mut log_mu = f64::NAN; // computed on the first slow-path test only
+        loop {
+            let u = self.uniform() - 0.5;
+            let v = self.uniform();
+            let us = 0.5 - u.abs();
+            let k = ((2.0 * a / us + b) * u + mu + 0.43).floor();
+            if us >= 0.07 && v * bm2 <= v_r_num {
+                return k;
+            }
+            if k < 0.0 || (us < 0.013 && v > us) {
+                continue;
+            }
+            if log_mu.is_nan() {
+                log_mu = mu.ln();
+            }
+            let inv_alpha = 1.1239 + 1.1328 / (b - 3.4);
+            let lhs = (v * inv_alpha / (a / (us * us) + b)).ln();
+            let rhs = -mu + k * log_mu - ln_factorial(k);
+            if lhs <= rhs {
+                return k;
+            }
+        }
+    }
+}
+
+const ZIG_N: usize = 256;
+const ZIG_R: f64 = 3.654_152_885_361_009;
+const ZIG_V: f64 = 0.004_928_673_233_99;
+
+struct Ziggurat {
+    /// Layer widths x[0] (base: V/f(R)) > x[1] = R > … > x[256] = 0.
+    x: Vec<f64>,
+    /// f(x[i]) = exp(−x[i]²/2).
+    f: Vec<f64>,
+}
+
+fn ziggurat() -> &'static Ziggurat {
+    static Z: OnceLock<Ziggurat> = OnceLock::new();
+    Z.get_or_init(|| {
+        let f = |x: f64| (-0.5 * x * x).exp();
+        let mut x = vec![0.0; ZIG_N + 1];
+        x[0] = ZIG_V / f(ZIG_R);
+        x[1] = ZIG_R;
+        for i in 2..ZIG_N {
+            x[i] = (-2.0 * (ZIG_V / x[i - 1] + f(x[i - 1])).ln()).sqrt();
+        }
+        x[ZIG_N] = 0.0;
+        let fx = x.iter().map(|&v| f(v)).collect();
+        Ziggurat { x, f: fx }
+    })
+}
+
+/// ln(k!) for integer-valued k ≥ 0: exact table below 256, Stirling series above
+/// (truncation error < 1e-16 relative there).
+pub fn ln_factorial(k: f64) -> f64 {
+    static TABLE: OnceLock<Vec<f64>> = OnceLock::new();
+    let t = TABLE.get_or_init(|| {
+        let mut v = vec![0.0f64; 256];
+        for i in 1..256 {
+            v[i] = v[i - 1] + (i as f64).ln();
+        }
+        v
+    });
+    if k < 256.0 {
+        return t[k.max(0.0) as usize];
+    }
+    let n = k + 1.0; // ln Γ(n)
+    let inv = 1.0 / n;
+    let inv2 = inv * inv;
+    (n - 0.5) * n.ln() - n
+        + 0.5 * std::f64::consts::TAU.ln()
+        + inv * (1.0 / 12.0 - inv2 * (1.0 / 360.0 - inv2 * (1.0 / 1260.0 - inv2 / 1680.0)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ln_factorial_matches_direct_sum_across_table_edge() {
+        let mut s = 0.0f64;
+        for i in 1..2000u32 {
+            s += (i as f64).ln();
+            let r = ln_factorial(i as f64);
+            assert!((r - s).abs() <= 1e-12 * s.max(1.0), "{i}: {r} vs {s}");
+        }
+    }
+
+    /// Chi-square goodness of fit of the sampler against the exact Poisson pmf,
+    /// on both sides of the inversion/PTRS switch and far from it.
+    #[test]
+    fn poisson_is_exact_by_chi_square() {
+        for &mu in &[0.3, 3.0, 9.99, 10.0, 25.0, 137.5, 5000.0] {
+            let n = 200_000usize;
+            let mut counts = std::collections::BTreeMap::<i64, f64>::new();
+            let mut sum = 0.0;
+            let mut sum2 = 0.0;
+            for i in 0..n {
+                let mut r = PixelRng::new(42, stream::PHOTON, i as u64);
+                let k = r.poisson(mu);
+                assert_eq!(k, k.floor());
+                sum += k;
+                sum2 += k * k;
+                *counts.entry(k as i64).or_default() += 1.0;
+            }
+            let mean = sum / n as f64;
+            let var = sum2 / n as f64 - mean * mean;
+            // mean SE = sqrt(mu/n); 5 sigma
+            assert!(
+                (mean - mu).abs() < 5.0 * (mu / n as f64).sqrt(),
+                "mu {mu}: mean {mean}"
+            );
+            // var SE ≈ mu·sqrt(2/n + 1/(mu n)); 5 sigma
+            let se = mu * (2.0 / n as f64 + 1.0 / (mu * n as f64)).sqrt();
+            assert!((var - mu).abs() < 5.0 * se, "mu {mu}: var {var}");
+            // chi-square over bins with expected count ≥ 20, tails pooled
+            let pmf = |k: i64| (-mu + k as f64 * mu.ln() - ln_factorial(k as f64)).exp();
+            let lo = (mu - 6.0 * mu.sqrt()).floor().max(0.0) as i64;
+            let hi = (mu + 6.0 * mu.sqrt()).ceil() as i64 + 10;
+            let mut chi2 = 0.0;
+            let mut dof = 0usize;
+            let mut pool_e = 0.0;
+            let mut pool_o = 0.0;
+            for k in lo..=hi {
+                let e = pmf(k) * n as f64;
+                let o = counts.get(&k).copied().unwrap_or(0.0);
+                if e >= 20.0 {
+                    chi2 += (o - e) * (o - e) / e;
+                    dof += 1;
+                } else {
+                    pool_e += e;
+                    pool_o += o;
+                }
+            }
+            if pool_e > 5.0 {
+                chi2 += (pool_o - pool_e).powi(2) / pool_e;
+                dof += 1;
+            }
+            // Chi-square with d dof: mean d, sd sqrt(2d); accept below d + 5 sd
+            // (p < 1e-5 of a false alarm for these dof).
+            let bound = dof as f64 + 5.0 * (2.0 * dof as f64).sqrt();
+            assert!(
+                chi2 < bound,
+                "mu {mu}: chi2 {chi2} with {dof} bins (bound {bound})"
+            );
+        }
+    }
+
+    #[test]
+    fn normal_moments() {
+        let n = 200_000;
+        let mut r = PixelRng::new(7, stream::READ, 0);
+        let (mut s, mut s2, mut s4) = (0.0, 0.0, 0.0);
+        for _ in 0..n {
+            let z = r.normal();
+            s += z;
+            s2 += z * z;
+            s4 += z * z * z * z;
+        }
+        let nf = n as f64;
+        assert!((s / nf).abs() < 5.0 / nf.sqrt());
+        assert!((s2 / nf - 1.0).abs() < 5.0 * (2.0 / nf).sqrt());
+        assert!((s4 / nf - 3.0).abs() < 5.0 * (96.0 / nf).sqrt());
+    }
+
+    /// Binned chi-square of the normal sampler against Φ, including both tails and the
+    /// ziggurat's base/tail boundary at 3.654.
+    #[test]
+    fn normal_is_exact_by_chi_square() {
+        let erf = |x: f64| {
+            // Abramowitz & Stegun 7.1.26, |error| < 1.5e-7
+            let t = 1.0 / (1.0 + 0.3275911 * x.abs());
+            let y = 1.0
+                - t * (0.254829592
+                    + t * (-0.284496736
+                        + t * (1.421413741 + t * (-1.453152027 + t * 1.061405429))))
+                    * (-x * x).exp();
+            if x >= 0.0 { y } else { -y }
+        };
+        let phi = |x: f64| 0.5 * (1.0 + erf(x / std::f64::consts::SQRT_2));
+        let edges: Vec<f64> = (-16..=16)
+            .map(|i| i as f64 * 0.25)
+            .chain([-3.654, 3.654])
+            .collect::<Vec<_>>();
+        let mut e = edges.clone();
+        e.sort_by(|a, b| a.total_cmp(b));
+        let n = 1_000_000usize;
+        let mut counts = vec![0.0f64; e.len() + 1];
+        let mut r = PixelRng::new(11, stream::READ, 3);
+        for _ in 0..n {
+            let z = r.normal();
+            counts[e.partition_point(|&b| b <= z)] += 1.0;
+        }
+        let mut chi2 = 0.0;
+        for k in 0..counts.len() {
+            let lo = if k == 0 { f64::NEG_INFINITY } else { e[k - 1] };
+            let hi = if k == e.len() { f64::INFINITY } else { e[k] };
+            let p = (if hi.is_finite() { phi(hi) } else { 1.0 })
+                - (if lo.is_finite() { phi(lo) } else { 0.0 });
+            let ex = p * n as f64;
+            chi2 += (counts[k] - ex).powi(2) / ex;
+        }
+        let dof = (counts.len() - 1) as f64;
+        assert!(
+            chi2 < dof + 5.0 * (2.0 * dof).sqrt(),
+            "chi2 {chi2} on {dof}"
+        );
+    }
+
+    #[test]
+    fn streams_differ_and_repeat() {
+        let a: Vec<u64> = (0..4)
+            .map(|i| PixelRng::new(1, stream::PHOTON, i).next_u64())
+            .collect();
+        let b: Vec<u64> = (0..4)
+            .map(|i| PixelRng::new(1, stream::PHOTON, i).next_u64())
+            .collect();
+        let c: Vec<u64> = (0..4)
+            .map(|i| PixelRng::new(1, stream::READ, i).next_u64())
+            .collect();
+        assert_eq!(a, b);
+        assert!(a.iter().zip(&c).all(|(x, y)| x != y));
+        assert!(PixelRng::new(0, 0, 0).poisson(f64::NAN) == 0.0);
+        assert!(PixelRng::new(0, 0, 0).poisson(-1.0) == 0.0);
+    }
+}

@@ -1,0 +1,10 @@
+//! Runs the sensor benchmark on demand (not part of the normal suite, no timing
+//! assertions): `cargo test --release --test sensor_bench -- --ignored --nocapture`.
+//! The lead wires `camsim::sensor::bench_sensor()` into `camsim bench sensor`.
+
+#[test]
+#[ignore]
+fn bench_sensor_report() {
+    let b = camsim::sensor::bench_sensor().unwrap();
+    println!("{b}");
+}
