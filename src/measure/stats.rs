@@ -95,3 +95,50 @@ mod tests {
         assert!(least_squares(&[1.0, 1.0, 1.0, 1.0], 2, 2, &[1.0, 2.0]).is_none());
     }
 }
+
+/// SplitMix64: a small deterministic generator for sampling regions and
+/// hold-out sets (seeded per measurement, so results are reproducible).
+#[derive(Clone, Debug)]
+pub struct SplitMix64(pub u64);
+
+impl SplitMix64 {
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E3779B97F4A7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58476D1CE4E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D049BB133111EB);
+        z ^ (z >> 31)
+    }
+    /// Uniform in [0, 1).
+    pub fn next_f64(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+    /// Uniform integer in [0, n).
+    pub fn below(&mut self, n: u64) -> u64 {
+        ((self.next_u64() as u128 * n as u128) >> 64) as u64
+    }
+    /// Standard normal (Box–Muller).
+    pub fn gauss(&mut self) -> f64 {
+        let u = self.next_f64().max(1e-300);
+        (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * self.next_f64()).cos()
+    }
+}
+
+/// Ordinary least-squares line y = a + b·x with standard errors of a and b.
+pub fn line_fit(x: &[f64], y: &[f64]) -> Option<(f64, f64, f64, f64)> {
+    let n = x.len();
+    if n < 3 || y.len() != n {
+        return None;
+    }
+    let (mx, my) = (mean(x), mean(y));
+    let sxx: f64 = x.iter().map(|v| (v - mx).powi(2)).sum();
+    if sxx <= 0.0 {
+        return None;
+    }
+    let b = x.iter().zip(y).map(|(a, c)| (a - mx) * (c - my)).sum::<f64>() / sxx;
+    let a = my - b * mx;
+    let s2 = x.iter().zip(y).map(|(xi, yi)| (yi - a - b * xi).powi(2)).sum::<f64>() / (n - 2) as f64;
+    let se_b = (s2 / sxx).sqrt();
+    let se_a = (s2 * (1.0 / n as f64 + mx * mx / sxx)).sqrt();
+    Some((a, b, se_a, se_b))
+}
