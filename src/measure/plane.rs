@@ -123,3 +123,52 @@ mod tests {
         assert!(Plane::new(1, 1, vec![f64::NAN]).is_err());
     }
 }
+
+/// One channel of an image: a whole plane (`index` None) or the pixels of one
+/// CFA channel of a mosaic plane.
+#[derive(Clone, Copy, Debug)]
+pub struct ChannelView<'a> {
+    pub name: &'a str,
+    pub plane: &'a Plane,
+    pub index: Option<u8>,
+}
+
+impl ChannelView<'_> {
+    /// The value at (x, y) if that pixel belongs to this channel.
+    pub fn value(&self, x: usize, y: usize) -> Option<f64> {
+        match self.index {
+            Some(c) if self.plane.channel_at(x, y) != Some(c) => None,
+            _ => Some(self.plane.get(x, y)),
+        }
+    }
+}
+
+/// Channel views of a mosaic (one per CFA channel) or of a single-channel plane
+/// (one view named `single_name`).
+pub fn channel_views<'a>(plane: &'a Plane, single_name: &'a str) -> Vec<ChannelView<'a>> {
+    if plane.is_mosaic() {
+        plane.channel_names.iter().enumerate().map(|(i, n)| ChannelView { name: n, plane, index: Some(i as u8) }).collect()
+    } else {
+        vec![ChannelView { name: single_name, plane, index: None }]
+    }
+}
+
+/// Views of separate full planes, e.g. the R, G, B planes of an RGB image.
+pub fn plane_views(planes: &[(String, Plane)]) -> Vec<ChannelView<'_>> {
+    planes.iter().map(|(n, p)| ChannelView { name: n, plane: p, index: None }).collect()
+}
+
+/// Label ids of named objects; errors name the missing object and suggest the nearest.
+pub fn label_ids(label_names: &[String], objects: &[String]) -> Result<Vec<u32>> {
+    objects
+        .iter()
+        .map(|o| {
+            label_names.iter().position(|n| n == o).map(|i| i as u32).ok_or_else(|| {
+                let hint = crate::diag::did_you_mean(o, label_names.iter().map(|s| s.as_str()))
+                    .map(|s| format!("; did you mean '{s}'?"))
+                    .unwrap_or_default();
+                Error::invalid(format!("no object labelled '{o}' in the image{hint}"))
+            })
+        })
+        .collect()
+}
