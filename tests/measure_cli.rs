@@ -11,7 +11,11 @@ fn erfc(x: f64) -> f64 {
     let p = -z * z - 1.26551223
         + t * (1.00002368
             + t * (0.37409196
-                + t * (0.09678418 + t * (-0.18628806 + t * (0.27886807 + t * (-1.13520398 + t * (1.48851587 + t * (-0.82215223 + t * 0.17087277))))))));
+                + t * (0.09678418
+                    + t * (-0.18628806
+                        + t * (0.27886807
+                            + t * (-1.13520398
+                                + t * (1.48851587 + t * (-0.82215223 + t * 0.17087277))))))));
     let a = t * p.exp();
     if x >= 0.0 { a } else { 2.0 - a }
 }
@@ -27,7 +31,8 @@ fn edge(w: usize, h: usize, sigma: f64) -> Vec<f64> {
                 for b in 0..16 {
                     let x = i as f64 - 0.5 + (b as f64 + 0.5) / 16.0 - w as f64 / 2.0;
                     let y = j as f64 - 0.5 + (a as f64 + 0.5) / 16.0 - h as f64 / 2.0;
-                    acc += 0.5 * erfc(-(x * th.cos() - y * th.sin()) / sigma / std::f64::consts::SQRT_2);
+                    acc += 0.5
+                        * erfc(-(x * th.cos() - y * th.sin()) / sigma / std::f64::consts::SQRT_2);
                 }
             }
             v.push(0.1 + 0.8 * acc / 256.0);
@@ -38,8 +43,19 @@ fn edge(w: usize, h: usize, sigma: f64) -> Vec<f64> {
 
 fn reference_mtf50(sigma: f64) -> f64 {
     let th = 5f64.to_radians();
-    let sinc = |x: f64| if x == 0.0 { 1.0 } else { (std::f64::consts::PI * x).sin() / (std::f64::consts::PI * x) };
-    let r = |f: f64| (-2.0 * std::f64::consts::PI.powi(2) * sigma * sigma * f * f).exp() * sinc(f * th.cos()) * sinc(f * th.sin()) * sinc(f / 4.0);
+    let sinc = |x: f64| {
+        if x == 0.0 {
+            1.0
+        } else {
+            (std::f64::consts::PI * x).sin() / (std::f64::consts::PI * x)
+        }
+    };
+    let r = |f: f64| {
+        (-2.0 * std::f64::consts::PI.powi(2) * sigma * sigma * f * f).exp()
+            * sinc(f * th.cos())
+            * sinc(f * th.sin())
+            * sinc(f / 4.0)
+    };
     let (mut a, mut b) = (0.0, 1.0);
     for _ in 0..60 {
         let m = 0.5 * (a + b);
@@ -49,12 +65,23 @@ fn reference_mtf50(sigma: f64) -> f64 {
 }
 
 fn camsim(args: &[&str]) -> (i32, String, String) {
-    let o = Command::new(env!("CARGO_BIN_EXE_camsim")).args(args).output().unwrap();
-    (o.status.code().unwrap_or(-1), String::from_utf8_lossy(&o.stdout).into(), String::from_utf8_lossy(&o.stderr).into())
+    let o = Command::new(env!("CARGO_BIN_EXE_camsim"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        o.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&o.stdout).into(),
+        String::from_utf8_lossy(&o.stderr).into(),
+    )
 }
 
 fn mtf50_of(out: &str) -> f64 {
-    out.lines().find_map(|l| l.strip_prefix("# mtf50_cy_per_px=")).unwrap().parse().unwrap()
+    out.lines()
+        .find_map(|l| l.strip_prefix("# mtf50_cy_per_px="))
+        .unwrap()
+        .parse()
+        .unwrap()
 }
 
 #[test]
@@ -76,12 +103,32 @@ fn measure_sfr_on_png_and_dng() {
     e.set_color(png::ColorType::Grayscale);
     e.set_depth(png::BitDepth::Sixteen);
     let mut wr = e.write_header().unwrap();
-    wr.write_image_data(&frame.iter().flat_map(|x| x.to_be_bytes()).collect::<Vec<u8>>()).unwrap();
+    wr.write_image_data(
+        &frame
+            .iter()
+            .flat_map(|x| x.to_be_bytes())
+            .collect::<Vec<u8>>(),
+    )
+    .unwrap();
     wr.finish().unwrap();
-    let (code, out, err) = camsim(&["measure", "sfr", png_path.to_str().unwrap(), "--roi", "12,4,80,72", "--pixel-um", "1.4"]);
+    let (code, out, err) = camsim(&[
+        "measure",
+        "sfr",
+        png_path.to_str().unwrap(),
+        "--roi",
+        "12,4,80,72",
+        "--pixel-um",
+        "1.4",
+    ]);
     assert_eq!(code, 0, "{err}");
     assert!(out.starts_with("freq_cy_per_px,freq_cy_per_mm,mtf\n"));
-    let second: Vec<f64> = out.lines().nth(2).unwrap().split(',').map(|s| s.parse().unwrap()).collect();
+    let second: Vec<f64> = out
+        .lines()
+        .nth(2)
+        .unwrap()
+        .split(',')
+        .map(|s| s.parse().unwrap())
+        .collect();
     assert!((second[1] - second[0] / 1.4e-3).abs() < 1e-3, "{second:?}");
     let t50 = reference_mtf50(0.8);
     let m50 = mtf50_of(&out);
@@ -90,7 +137,10 @@ fn measure_sfr_on_png_and_dng() {
 
     // DNG Bayer mosaic, green channel, black level 64.
     let cfa = CfaPattern::bayer("rggb").unwrap();
-    let dv: Vec<u16> = v.iter().map(|x| (64.0 + x * 1000.0).round() as u16).collect();
+    let dv: Vec<u16> = v
+        .iter()
+        .map(|x| (64.0 + x * 1000.0).round() as u16)
+        .collect();
     let dng = dir.path().join("edge.dng");
     write_dng_cfa(&dng, w as u32, h as u32, &dv, &cfa, 64.0, 1023.0).unwrap();
     let (code, out, err) = camsim(&["measure", "sfr", dng.to_str().unwrap(), "--channel", "g"]);
@@ -105,7 +155,13 @@ fn measure_sfr_on_png_and_dng() {
     let (code, _, err) = camsim(&["measure", "sfr", bad.to_str().unwrap()]);
     assert_eq!(code, 3);
     assert!(err.contains("bad.exr"), "{err}");
-    let (code, _, err) = camsim(&["measure", "sfr", png_path.to_str().unwrap(), "--roi", "90,4,80,72"]);
+    let (code, _, err) = camsim(&[
+        "measure",
+        "sfr",
+        png_path.to_str().unwrap(),
+        "--roi",
+        "90,4,80,72",
+    ]);
     assert_eq!(code, 3);
     assert!(err.contains("outside"), "{err}");
 }

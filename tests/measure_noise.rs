@@ -39,7 +39,10 @@ fn electrons(x: usize, y: usize) -> f64 {
 
 fn dead(x: usize, y: usize) -> bool {
     // Dead green pixels (x + y odd in RGGB) inside some uniform patches.
-    (x + y) % 2 == 1 && x % 23 == 7 && y % 29 == 12 && matches!(kind(x / P, y / P), Kind::Uniform(_))
+    (x + y) % 2 == 1
+        && x % 23 == 7
+        && y % 29 == 12
+        && matches!(kind(x / P, y / P), Kind::Uniform(_))
 }
 
 #[test]
@@ -52,16 +55,29 @@ fn appendix_iv_selection_agrees_with_truth() {
         for x in 0..w {
             let e = electrons(x, y);
             // Photon noise: Gaussian with variance = mean (Poisson at ≥ 250 e⁻), DV quantised.
-            let v = if dead(x, y) { 0.0 } else { ((e + e.sqrt() * rng.gauss()) * CG).round() };
+            let v = if dead(x, y) {
+                0.0
+            } else {
+                ((e + e.sqrt() * rng.gauss()) * CG).round()
+            };
             data.push(v);
         }
     }
     let mut plane = Plane::new(w, w, data).unwrap();
-    plane.channel = (0..w).flat_map(|y| (0..w).map(move |x| (x, y))).map(|(x, y)| cfa.channel_at(x as u32, y as u32) as u8).collect();
+    plane.channel = (0..w)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .map(|(x, y)| cfa.channel_at(x as u32, y as u32) as u8)
+        .collect();
     plane.channel_names = cfa.channels.clone();
-    let opts = NoiseOptions { regions: 1500, conversion_gain_dv_per_e: CG, seed: 7, ..Default::default() };
+    let opts = NoiseOptions {
+        regions: 1500,
+        conversion_gain_dv_per_e: CG,
+        seed: 7,
+        ..Default::default()
+    };
     let (m, regions) = measure(&plane, &opts, "noise").unwrap();
-    let (mut uni, mut uni_acc, mut nonuni, mut nonuni_acc, mut deadn, mut dead_out) = (0, 0, 0, 0, 0, 0);
+    let (mut uni, mut uni_acc, mut nonuni, mut nonuni_acc, mut deadn, mut dead_out) =
+        (0, 0, 0, 0, 0, 0);
     for r in &regions {
         let (x0, y0) = (r.rect.x as usize, r.rect.y as usize);
         let one_patch = x0 / P == (x0 + 9) / P && y0 / P == (y0 + 9) / P;
@@ -80,8 +96,13 @@ fn appendix_iv_selection_agrees_with_truth() {
     }
     let fu = uni_acc as f64 / uni as f64;
     let fn_ = nonuni_acc as f64 / nonuni as f64;
-    println!("uniform {uni_acc}/{uni} accepted ({fu:.3}); non-uniform {nonuni_acc}/{nonuni} accepted ({fn_:.4}); dead {dead_out}/{deadn} rejected as outliers");
-    assert!(deadn > 20 && uni > 200 && nonuni > 200, "test geometry gives too few regions of a kind");
+    println!(
+        "uniform {uni_acc}/{uni} accepted ({fu:.3}); non-uniform {nonuni_acc}/{nonuni} accepted ({fn_:.4}); dead {dead_out}/{deadn} rejected as outliers"
+    );
+    assert!(
+        deadn > 20 && uni > 200 && nonuni > 200,
+        "test geometry gives too few regions of a kind"
+    );
     // Every region with a dead pixel is rejected by the 3σ test (0 e⁻ is ≥ 24σ below the median).
     assert_eq!(dead_out, deadn);
     // Uniform regions: false rejections are expected from the 3σ test on 50 pixels
@@ -91,7 +112,19 @@ fn appendix_iv_selection_agrees_with_truth() {
     // the signal is ≥ 2× the photon noise, so almost none may pass.
     assert!(fn_ < 0.02, "non-uniform regions accepted: {fn_}");
     // The accepted regions are photon-noise limited: var = CG·mean (+ 1/12 DV² quantisation).
-    let slope = m.figures.iter().find(|f| f.quantity == "variance_slope").unwrap();
-    println!("variance slope {} ± {} DV/e- (true {CG})", slope.value, slope.stderr);
-    assert!((slope.value - CG).abs() < 4.0 * slope.stderr + 0.01, "slope {} ± {}", slope.value, slope.stderr);
+    let slope = m
+        .figures
+        .iter()
+        .find(|f| f.quantity == "variance_slope")
+        .unwrap();
+    println!(
+        "variance slope {} ± {} DV/e- (true {CG})",
+        slope.value, slope.stderr
+    );
+    assert!(
+        (slope.value - CG).abs() < 4.0 * slope.stderr + 0.01,
+        "slope {} ± {}",
+        slope.value,
+        slope.stderr
+    );
 }

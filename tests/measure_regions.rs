@@ -26,7 +26,11 @@ fn chart() -> (Plane, Vec<u32>, Vec<String>) {
                 let k = (py * 6 + px + 1) as f64;
                 labels[y * w + x] = (py * 6 + px) as u32;
                 let border = ix == 0 || iy == 0 || ix == 19 || iy == 19;
-                data[y * w + x] = if border { 999.0 } else { [10.0 * k, 20.0 * k, 5.0 * k + 3.0][c] };
+                data[y * w + x] = if border {
+                    999.0
+                } else {
+                    [10.0 * k, 20.0 * k, 5.0 * k + 3.0][c]
+                };
             }
         }
     }
@@ -55,7 +59,9 @@ fn mcc_patch_means_from_labels_exclude_edges() {
     let m = measured(&patches, "mcc");
     assert_eq!(m.figures.len(), 72);
     assert_eq!(m.figures[4].quantity, "patch02/g_mean");
-    let e = patch_means(&views, &labels, &names, "mac", 0.1).unwrap_err().to_string();
+    let e = patch_means(&views, &labels, &names, "mac", 0.1)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("did you mean 'mcc'"), "{e}");
 }
 
@@ -64,18 +70,45 @@ fn profile_through_achromatic_row_gives_channel_ratios() {
     let (p, labels, names) = chart();
     let views = channel_views(&p, "y");
     let objects: Vec<String> = (19..=24).map(|k| format!("mcc/patch{k:02}")).collect();
-    let m = profile(&views, &labels, &names, &objects, &ProfileOptions::default(), "profile").unwrap();
+    let m = profile(
+        &views,
+        &labels,
+        &names,
+        &objects,
+        &ProfileOptions::default(),
+        "profile",
+    )
+    .unwrap();
     // Band: 4 rows through the row centre (y = 88…91), clear of the top and bottom borders.
     // The profile reads every labelled pixel in the band (no erosion), so in each band
     // row the 10 r (or g) pixels of a patch include exactly one border pixel (999).
     for o in &objects {
-        let f = m.figures.iter().find(|f| f.quantity == format!("{o}/g/r")).unwrap();
+        let f = m
+            .figures
+            .iter()
+            .find(|f| f.quantity == format!("{o}/g/r"))
+            .unwrap();
         let k: f64 = o[9..].parse().unwrap();
         let (r_in, g_in) = (10.0 * k, 20.0 * k);
         let r_mean = (9.0 * r_in + 999.0) / 10.0;
         let g_mean = (9.0 * g_in + 999.0) / 10.0;
-        assert!((f.value - g_mean / r_mean).abs() < 1e-9, "{o}: {} vs {}", f.value, g_mean / r_mean);
+        assert!(
+            (f.value - g_mean / r_mean).abs() < 1e-9,
+            "{o}: {} vs {}",
+            f.value,
+            g_mean / r_mean
+        );
     }
     assert!(m.curves.iter().any(|c| c.name == "ratio/g/r"));
-    assert!(profile(&views, &labels, &names, &["mcc/patch99".into()], &ProfileOptions::default(), "p").is_err());
+    assert!(
+        profile(
+            &views,
+            &labels,
+            &names,
+            &["mcc/patch99".into()],
+            &ProfileOptions::default(),
+            "p"
+        )
+        .is_err()
+    );
 }

@@ -18,7 +18,10 @@ fn erfc(x: f64) -> f64 {
         + t * (1.00002368
             + t * (0.37409196
                 + t * (0.09678418
-                    + t * (-0.18628806 + t * (0.27886807 + t * (-1.13520398 + t * (1.48851587 + t * (-0.82215223 + t * 0.17087277))))))));
+                    + t * (-0.18628806
+                        + t * (0.27886807
+                            + t * (-1.13520398
+                                + t * (1.48851587 + t * (-0.82215223 + t * 0.17087277))))))));
     let ans = t * p.exp();
     if x >= 0.0 { ans } else { 2.0 - ans }
 }
@@ -54,20 +57,31 @@ fn edge_image(sigma: f64) -> Vec<f64> {
 }
 
 fn sinc(x: f64) -> f64 {
-    if x.abs() < 1e-12 { 1.0 } else { (std::f64::consts::PI * x).sin() / (std::f64::consts::PI * x) }
+    if x.abs() < 1e-12 {
+        1.0
+    } else {
+        (std::f64::consts::PI * x).sin() / (std::f64::consts::PI * x)
+    }
 }
 
 fn reference(sigma: f64, f: f64) -> f64 {
     let th = THETA_DEG.to_radians();
     let pi2 = std::f64::consts::PI.powi(2);
-    (-2.0 * pi2 * sigma * sigma * f * f).exp() * sinc(f * th.cos()) * sinc(f * th.sin()) * sinc(f / 4.0)
+    (-2.0 * pi2 * sigma * sigma * f * f).exp()
+        * sinc(f * th.cos())
+        * sinc(f * th.sin())
+        * sinc(f / 4.0)
 }
 
 fn reference_mtf50(sigma: f64) -> f64 {
     let (mut a, mut b) = (0.0, 2.0);
     for _ in 0..60 {
         let m = 0.5 * (a + b);
-        if reference(sigma, m) > 0.5 { a = m } else { b = m }
+        if reference(sigma, m) > 0.5 {
+            a = m
+        } else {
+            b = m
+        }
     }
     0.5 * (a + b)
 }
@@ -93,7 +107,14 @@ impl Rng {
 fn sfr_matches_gaussian_psf_times_pixel_aperture() {
     for sigma in [0.3, 0.5, 0.8, 1.0, 1.5] {
         let p = Plane::new(W, H, edge_image(sigma)).unwrap();
-        let r = sfr(&p, &SfrOptions { pixel_pitch_m: Some(1.4e-6), ..Default::default() }).unwrap();
+        let r = sfr(
+            &p,
+            &SfrOptions {
+                pixel_pitch_m: Some(1.4e-6),
+                ..Default::default()
+            },
+        )
+        .unwrap();
         let mut worst: f64 = 0.0;
         for (f, m) in r.freq_cy_per_px.iter().zip(&r.mtf) {
             if *f <= 0.5 + 1e-9 {
@@ -111,7 +132,11 @@ fn sfr_matches_gaussian_psf_times_pixel_aperture() {
         assert!(worst < 0.01, "sigma {sigma}: MTF deviates by {worst}");
         assert!(rel < 0.01, "sigma {sigma}: MTF50 {m50} vs {t50}");
         // The edge is at −5° in image coordinates (x decreases... see generator): |angle| = 5°.
-        assert!((r.edge_angle_deg.abs() - THETA_DEG).abs() < 0.05, "angle {}", r.edge_angle_deg);
+        assert!(
+            (r.edge_angle_deg.abs() - THETA_DEG).abs() < 0.05,
+            "angle {}",
+            r.edge_angle_deg
+        );
         let cy_mm = r.freq_cy_per_mm().unwrap();
         assert!((cy_mm[1] / r.freq_cy_per_px[1] - 1.0 / 1.4e-3).abs() < 1e-6);
     }
@@ -136,14 +161,24 @@ fn sfr_on_bayer_mosaic_green_and_lum() {
     let cfa = CfaPattern::bayer("rggb").unwrap();
     let gains = [0.45, 1.0, 0.7];
     let mut p = Plane::new(W, H, v).unwrap();
-    p.channel = (0..H).flat_map(|y| (0..W).map(move |x| (x, y))).map(|(x, y)| cfa.channel_at(x as u32, y as u32) as u8).collect();
+    p.channel = (0..H)
+        .flat_map(|y| (0..W).map(move |x| (x, y)))
+        .map(|(x, y)| cfa.channel_at(x as u32, y as u32) as u8)
+        .collect();
     p.channel_names = cfa.channels.clone();
     for i in 0..p.data.len() {
         p.data[i] *= gains[p.channel[i] as usize];
     }
     let t50 = reference_mtf50(sigma);
     for ch in ["g", "r", "lum"] {
-        let r = sfr(&p, &SfrOptions { channel: SfrChannel::parse(ch).unwrap(), ..Default::default() }).unwrap();
+        let r = sfr(
+            &p,
+            &SfrOptions {
+                channel: SfrChannel::parse(ch).unwrap(),
+                ..Default::default()
+            },
+        )
+        .unwrap();
         let worst = r
             .freq_cy_per_px
             .iter()
@@ -164,7 +199,11 @@ fn sfr_on_bayer_mosaic_green_and_lum() {
 fn sfr_noise_stays_within_reported_stderr() {
     let sigma = 0.8;
     let clean = edge_image(sigma);
-    let base = sfr(&Plane::new(W, H, clean.clone()).unwrap(), &SfrOptions::default()).unwrap();
+    let base = sfr(
+        &Plane::new(W, H, clean.clone()).unwrap(),
+        &SfrOptions::default(),
+    )
+    .unwrap();
     let noise_sd = 0.01; // edge contrast 0.8 → contrast/noise 80
     let seeds = 16;
     let (mut m50s, mut ses) = (vec![], vec![]);
@@ -176,7 +215,11 @@ fn sfr_noise_stays_within_reported_stderr() {
         let m50 = r.mtf50_cy_per_px.unwrap();
         // Each seed: the noise-induced MTF50 change lies within 3 reported standard errors.
         let d = m50 - base.mtf50_cy_per_px.unwrap();
-        assert!(d.abs() <= 3.0 * r.mtf50_stderr, "seed {seed}: ΔMTF50 {d} vs se {}", r.mtf50_stderr);
+        assert!(
+            d.abs() <= 3.0 * r.mtf50_stderr,
+            "seed {seed}: ΔMTF50 {d} vs se {}",
+            r.mtf50_stderr
+        );
         m50s.push(m50);
         ses.push(r.mtf50_stderr);
         for (i, f) in r.freq_cy_per_px.iter().enumerate() {
@@ -192,11 +235,15 @@ fn sfr_noise_stays_within_reported_stderr() {
     let sd = (m50s.iter().map(|m| (m - mean).powi(2)).sum::<f64>() / (seeds - 1) as f64).sqrt();
     let mean_se = ses.iter().sum::<f64>() / seeds as f64;
     let frac = inside as f64 / total as f64;
-    println!("MTF50 spread over seeds {sd:.5}, mean reported se {mean_se:.5}; MTF points within 3 se: {frac:.3}");
+    println!(
+        "MTF50 spread over seeds {sd:.5}, mean reported se {mean_se:.5}; MTF points within 3 se: {frac:.3}"
+    );
     // Calibration of the jackknife: with 16 seeds the sample sd itself has ~18%
     // relative error, and the jackknife se ~25%; a factor 2 either way is a real miss.
-    assert!(sd / mean_se > 0.5 && sd / mean_se < 2.0, "se not calibrated: sd {sd} vs se {mean_se}");
+    assert!(
+        sd / mean_se > 0.5 && sd / mean_se < 2.0,
+        "se not calibrated: sd {sd} vs se {mean_se}"
+    );
     // For Gaussian errors 99.7% fall within 3 se; allow for jackknife se noise.
     assert!(frac > 0.95, "only {frac} of MTF points within 3 se");
 }
-

@@ -137,7 +137,9 @@ fn run_sfr(a: SfrArgs) -> Result<i32> {
     let pitch_m = a.pixel_um.map(|p| p * 1e-6);
     if let Some(p) = a.pixel_um {
         if !(p > 0.0 && p.is_finite()) {
-            return Err(Error::invalid(format!("--pixel-um {p}: must be a positive number of micrometres")));
+            return Err(Error::invalid(format!(
+                "--pixel-um {p}: must be a positive number of micrometres"
+            )));
         }
     }
     let opts = sfr::SfrOptions {
@@ -150,7 +152,10 @@ fn run_sfr(a: SfrArgs) -> Result<i32> {
     let mm = r.freq_cy_per_mm();
     println!("freq_cy_per_px,freq_cy_per_mm,mtf");
     for (i, (f, m)) in r.freq_cy_per_px.iter().zip(&r.mtf).enumerate() {
-        let fm = mm.as_ref().map(|v| format!("{:.6}", v[i])).unwrap_or_default();
+        let fm = mm
+            .as_ref()
+            .map(|v| format!("{:.6}", v[i]))
+            .unwrap_or_default();
         println!("{f:.6},{fm},{m:.6}");
     }
     match r.mtf50_cy_per_px {
@@ -161,7 +166,10 @@ fn run_sfr(a: SfrArgs) -> Result<i32> {
         println!("# mtf50_cy_per_mm={:.4}", m / (p * 1e3));
     }
     println!("# mtf50_stderr_cy_per_px={:.6}", r.mtf50_stderr);
-    println!("# edge_angle_deg={:.4} ± {:.4}", r.edge_angle_deg, r.edge_angle_stderr_deg);
+    println!(
+        "# edge_angle_deg={:.4} ± {:.4}",
+        r.edge_angle_deg, r.edge_angle_stderr_deg
+    );
     println!("# rows_used={} transposed={}", r.rows_used, r.transposed);
     Ok(0)
 }
@@ -178,10 +186,14 @@ fn run_noise(a: NoiseArgs) -> Result<i32> {
         channel: a.channel.clone(),
         ..Default::default()
     };
-    let (m, regions) = noise::measure(&plane, &opts, "noise").map_err(|e| Error::io(&a.image, e))?;
+    let (m, regions) =
+        noise::measure(&plane, &opts, "noise").map_err(|e| Error::io(&a.image, e))?;
     println!("x,y,w,h,verdict,mean_dv,std_dv");
     for r in &regions {
-        println!("{},{},{},{},{:?},{:.4},{:.4}", r.rect.x, r.rect.y, r.rect.w, r.rect.h, r.verdict, r.mean_dv, r.std_dv);
+        println!(
+            "{},{},{},{},{:?},{:.4},{:.4}",
+            r.rect.x, r.rect.y, r.rect.w, r.rect.h, r.verdict, r.mean_dv, r.std_dv
+        );
     }
     print_figures(&m);
     Ok(0)
@@ -190,7 +202,12 @@ fn run_noise(a: NoiseArgs) -> Result<i32> {
 fn run_ri(a: RiArgs) -> Result<i32> {
     let img = read_image(&a.image)?;
     let plane = img.plane_for(&a.channel)?;
-    let opts = ri::RiOptions { pixel_pitch_m: a.pixel_um.map(|p| p * 1e-6), bins: a.bins, channel: a.channel.clone(), ..Default::default() };
+    let opts = ri::RiOptions {
+        pixel_pitch_m: a.pixel_um.map(|p| p * 1e-6),
+        bins: a.bins,
+        channel: a.channel.clone(),
+        ..Default::default()
+    };
     let m = ri::relative_illumination(&plane, &opts, "ri").map_err(|e| Error::io(&a.image, e))?;
     let c = &m.curves[0];
     println!("field_height_{},ri,stderr", c.x_unit);
@@ -204,7 +221,15 @@ fn run_ri(a: RiArgs) -> Result<i32> {
 fn labelled(img: &LoadedImage, l: &LabelArgs) -> Result<(Vec<u32>, Vec<String>)> {
     let (w, h, labels, names) = read_label_map(&l.labels, &l.names)?;
     if (w, h) != (img.width, img.height) {
-        return Err(Error::io(&l.labels, format!("label map is {w}×{h} but {} is {}×{}", img.path.display(), img.width, img.height)));
+        return Err(Error::io(
+            &l.labels,
+            format!(
+                "label map is {w}×{h} but {} is {}×{}",
+                img.path.display(),
+                img.width,
+                img.height
+            ),
+        ));
     }
     Ok((labels, names))
 }
@@ -214,8 +239,14 @@ fn run_profile(a: ProfileArgs) -> Result<i32> {
     let (labels, names) = labelled(&img, &a.label)?;
     let views = img.views();
     let step = if img.mosaic.is_some() { 2 } else { 1 };
-    let opts = profile::ProfileOptions { band_px: a.band_px, vertical: a.vertical, step_px: step, ..Default::default() };
-    let m = profile::profile(&views, &labels, &names, &a.objects, &opts, "profile").map_err(|e| Error::io(&a.image, e))?;
+    let opts = profile::ProfileOptions {
+        band_px: a.band_px,
+        vertical: a.vertical,
+        step_px: step,
+        ..Default::default()
+    };
+    let m = profile::profile(&views, &labels, &names, &a.objects, &opts, "profile")
+        .map_err(|e| Error::io(&a.image, e))?;
     let head: Vec<String> = m.curves.iter().map(|c| c.name.replace('/', "_")).collect();
     println!("position_px,{}", head.join(","));
     for i in 0..m.curves[0].x.len() {
@@ -230,7 +261,8 @@ fn run_mcc(a: MccArgs) -> Result<i32> {
     let img = read_image(&a.image)?;
     let (labels, names) = labelled(&img, &a.label)?;
     let views = img.views();
-    let patches = mcc::patch_means(&views, &labels, &names, &a.chart, a.erode).map_err(|e| Error::io(&a.image, e))?;
+    let patches = mcc::patch_means(&views, &labels, &names, &a.chart, a.erode)
+        .map_err(|e| Error::io(&a.image, e))?;
     println!("patch,channel,mean_dv,stderr_dv,pixels");
     for p in &patches {
         for (c, m, se) in &p.means {

@@ -10,9 +10,13 @@ pub struct DiffArgs {
     pub a: String,
     /// Results directory or git revision.
     pub b: String,
-    /// Significance threshold: |Δ| / √(se_a² + se_b²).
+    /// Significance threshold in σ of |Δ| / √(se_a² + se_b²), as a false-alarm
+    /// rate for the whole comparison (Šidák-corrected per figure) unless --per-figure.
     #[arg(long, default_value_t = 3.0)]
     pub threshold: f64,
+    /// Test each figure at --threshold itself (no correction for the number of figures).
+    #[arg(long)]
+    pub per_figure: bool,
     /// Relative floor: changes smaller than this fraction of the value are never significant.
     #[arg(long, default_value_t = 1e-3)]
     pub rel_floor: f64,
@@ -26,9 +30,15 @@ pub struct DiffArgs {
 
 pub fn diff(a: DiffArgs) -> Result<i32> {
     if !(a.threshold >= 0.0 && a.rel_floor >= 0.0) {
-        return Err(camsim::Error::invalid("--threshold and --rel-floor must be ≥ 0"));
+        return Err(camsim::Error::invalid(
+            "--threshold and --rel-floor must be ≥ 0",
+        ));
     }
-    let opts = DiffOptions { threshold_sigma: a.threshold, rel_floor: a.rel_floor };
+    let opts = DiffOptions {
+        threshold_sigma: a.threshold,
+        rel_floor: a.rel_floor,
+        per_figure: a.per_figure,
+    };
     let ra = load_side(&a.a, &a.git_path)?;
     let rb = load_side(&a.b, &a.git_path)?;
     let d = diff_rows(&ra, &rb, &opts);
@@ -52,7 +62,10 @@ pub fn report(a: ReportArgs) -> Result<i32> {
         return Ok(0);
     }
     let rd = std::fs::read_dir(&a.dir).map_err(|e| camsim::Error::io(&a.dir, e))?;
-    let mut dirs: Vec<PathBuf> = rd.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.join("results.csv").exists()).collect();
+    let mut dirs: Vec<PathBuf> = rd
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.join("results.csv").exists())
+        .collect();
     dirs.sort();
     let mut failed = 0;
     for d in &dirs {

@@ -1,5 +1,5 @@
 //! Simulated against reference (measured) values, e.g. MCC RGB means:
-//! scatter, RMSE, percentage error and the least-squares slope through the
+//! scatter, RMSE, mean absolute percentage error and the least-squares slope through the
 //! origin (1 when simulation and reference agree up to noise).
 //!
 //! Standard errors: the RMSE's from the per-pair squared errors
@@ -26,8 +26,16 @@ pub fn pair_by_name(sim: &[(String, f64)], reference: &[(String, f64)]) -> Resul
             reference
                 .iter()
                 .find(|r| &r.0 == n)
-                .map(|r| Pair { name: n.clone(), simulated: *s, reference: r.1 })
-                .ok_or_else(|| Error::invalid(format!("'{n}' has a simulated value but no reference value")))
+                .map(|r| Pair {
+                    name: n.clone(),
+                    simulated: *s,
+                    reference: r.1,
+                })
+                .ok_or_else(|| {
+                    Error::invalid(format!(
+                        "'{n}' has a simulated value but no reference value"
+                    ))
+                })
         })
         .collect()
 }
@@ -35,29 +43,61 @@ pub fn pair_by_name(sim: &[(String, f64)], reference: &[(String, f64)]) -> Resul
 pub fn compare(pairs: &[Pair], unit: &str, measurement: &str) -> Result<Measured> {
     let n = pairs.len();
     if n < 2 {
-        return Err(Error::invalid("comparison needs at least 2 simulated/reference pairs"));
+        return Err(Error::invalid(
+            "comparison needs at least 2 simulated/reference pairs",
+        ));
     }
-    if pairs.iter().any(|p| !p.simulated.is_finite() || !p.reference.is_finite()) {
+    if pairs
+        .iter()
+        .any(|p| !p.simulated.is_finite() || !p.reference.is_finite())
+    {
         return Err(Error::invalid("comparison: non-finite value"));
     }
-    let sq: Vec<f64> = pairs.iter().map(|p| (p.simulated - p.reference).powi(2)).collect();
+    let sq: Vec<f64> = pairs
+        .iter()
+        .map(|p| (p.simulated - p.reference).powi(2))
+        .collect();
     let mse = mean(&sq);
     let rmse = mse.sqrt();
     let se_mse = std_dev(&sq) / (n as f64).sqrt();
-    let se_rmse = if rmse > 0.0 { se_mse / (2.0 * rmse) } else { 0.0 };
-    let pct: Vec<f64> = pairs.iter().filter(|p| p.reference != 0.0).map(|p| 100.0 * (p.simulated - p.reference).abs() / p.reference.abs()).collect();
+    let se_rmse = if rmse > 0.0 {
+        se_mse / (2.0 * rmse)
+    } else {
+        0.0
+    };
+    let pct: Vec<f64> = pairs
+        .iter()
+        .filter(|p| p.reference != 0.0)
+        .map(|p| 100.0 * (p.simulated - p.reference).abs() / p.reference.abs())
+        .collect();
     let sxx: f64 = pairs.iter().map(|p| p.reference * p.reference).sum();
+    let ref_mean = mean(&pairs.iter().map(|p| p.reference).collect::<Vec<_>>()).abs();
     let mut figures = vec![
         Figure::new(measurement, "rmse", unit, rmse, se_rmse),
-        Figure::new(measurement, "rmse_pct_of_mean", "%", 100.0 * rmse / mean(&pairs.iter().map(|p| p.reference).collect::<Vec<_>>()).abs(), 0.0),
+        Figure::new(
+            measurement,
+            "rmse_pct_of_mean",
+            "%",
+            100.0 * rmse / ref_mean,
+            100.0 * se_rmse / ref_mean,
+        ),
     ];
     if !pct.is_empty() {
-        figures.push(Figure::new(measurement, "mean_abs_pct_error", "%", mean(&pct), std_dev(&pct) / (pct.len() as f64).sqrt()));
-        figures.push(Figure::new(measurement, "max_abs_pct_error", "%", pct.iter().cloned().fold(0.0, f64::max), 0.0));
+        figures.push(Figure::new(
+            measurement,
+            "mean_abs_pct_error",
+            "%",
+            mean(&pct),
+            std_dev(&pct) / (pct.len() as f64).sqrt(),
+        ));
     }
     if sxx > 0.0 {
         let b = pairs.iter().map(|p| p.reference * p.simulated).sum::<f64>() / sxx;
-        let s2 = pairs.iter().map(|p| (p.simulated - b * p.reference).powi(2)).sum::<f64>() / (n - 1) as f64;
+        let s2 = pairs
+            .iter()
+            .map(|p| (p.simulated - b * p.reference).powi(2))
+            .sum::<f64>()
+            / (n - 1) as f64;
         figures.push(Figure::new(measurement, "slope", "1", b, (s2 / sxx).sqrt()));
     }
     let curves = vec![Curve::new(
@@ -68,7 +108,11 @@ pub fn compare(pairs: &[Pair], unit: &str, measurement: &str) -> Result<Measured
         pairs.iter().map(|p| p.simulated).collect(),
         vec![],
     )];
-    Ok(Measured { figures, curves, pixels_read: vec![] })
+    Ok(Measured {
+        figures,
+        curves,
+        pixels_read: vec![],
+    })
 }
 
 #[cfg(test)]
@@ -76,8 +120,15 @@ mod tests {
     use super::*;
     #[test]
     fn rmse_pct_and_slope() {
-        let pairs: Vec<Pair> =
-            [(100.0, 110.0), (200.0, 220.0), (300.0, 330.0)].iter().enumerate().map(|(i, &(r, s))| Pair { name: format!("{i}"), simulated: s, reference: r }).collect();
+        let pairs: Vec<Pair> = [(100.0, 110.0), (200.0, 220.0), (300.0, 330.0)]
+            .iter()
+            .enumerate()
+            .map(|(i, &(r, s))| Pair {
+                name: format!("{i}"),
+                simulated: s,
+                reference: r,
+            })
+            .collect();
         let m = compare(&pairs, "DV", "cmp").unwrap();
         let get = |q: &str| m.figures.iter().find(|f| f.quantity == q).unwrap().value;
         assert!((get("rmse") - (1400.0f64 / 3.0).sqrt() * 1.0).abs() < 1e-9);

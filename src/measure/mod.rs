@@ -36,7 +36,14 @@ pub struct Curve {
 }
 
 impl Curve {
-    pub fn new(name: &str, x: (&str, &str), y: (&str, &str), xs: Vec<f64>, ys: Vec<f64>, se: Vec<f64>) -> Self {
+    pub fn new(
+        name: &str,
+        x: (&str, &str),
+        y: (&str, &str),
+        xs: Vec<f64>,
+        ys: Vec<f64>,
+        se: Vec<f64>,
+    ) -> Self {
         Self {
             name: name.into(),
             x_name: x.0.into(),

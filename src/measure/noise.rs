@@ -84,10 +84,19 @@ pub struct Region {
 }
 
 /// Classify one region (pixels of the channel inside `rect`).
-pub fn classify(plane: &Plane, rect: Rect, opts: &NoiseOptions, rng: &mut SplitMix64) -> Result<Region> {
+pub fn classify(
+    plane: &Plane,
+    rect: Rect,
+    opts: &NoiseOptions,
+    rng: &mut SplitMix64,
+) -> Result<Region> {
     let ch = if plane.is_mosaic() {
         Some(plane.channel_index(&opts.channel).ok_or_else(|| {
-            Error::invalid(format!("channel '{}' is not in the CFA ({})", opts.channel, plane.channel_names.join(", ")))
+            Error::invalid(format!(
+                "channel '{}' is not in the CFA ({})",
+                opts.channel,
+                plane.channel_names.join(", ")
+            ))
         })?)
     } else {
         None
@@ -105,13 +114,24 @@ pub fn classify(plane: &Plane, rect: Rect, opts: &NoiseOptions, rng: &mut SplitM
         }
     }
     let n = vs.len();
-    let mut r = Region { rect, verdict: Verdict::Unusable, mean_dv: mean(&vs), std_dv: std_dev(&vs), n, rmse_const: 0.0, rmse_poly: 0.0 };
+    let mut r = Region {
+        rect,
+        verdict: Verdict::Unusable,
+        mean_dv: mean(&vs),
+        std_dv: std_dev(&vs),
+        n,
+        rmse_const: 0.0,
+        rmse_poly: 0.0,
+    };
     let med_e = median(&vs) / opts.conversion_gain_dv_per_e;
     if n < 6 * opts.folds.max(2) || med_e <= 0.0 {
         return Ok(r);
     }
     let sigma_e = (med_e + opts.read_noise_e * opts.read_noise_e).sqrt();
-    if vs.iter().any(|v| (v / opts.conversion_gain_dv_per_e - med_e).abs() > opts.outlier_sigma * sigma_e) {
+    if vs
+        .iter()
+        .any(|v| (v / opts.conversion_gain_dv_per_e - med_e).abs() > opts.outlier_sigma * sigma_e)
+    {
         r.verdict = Verdict::Outlier;
         return Ok(r);
     }
@@ -131,7 +151,8 @@ pub fn classify(plane: &Plane, rect: Rect, opts: &NoiseOptions, rng: &mut SplitM
         let train: Vec<usize> = (0..n).filter(|&i| fold[i] != k).collect();
         let a: Vec<f64> = train.iter().flat_map(|&i| basis(xs[i], ys[i])).collect();
         let b: Vec<f64> = train.iter().map(|&i| vs[i]).collect();
-        let c = least_squares(&a, train.len(), 6, &b).ok_or_else(|| Error::invalid("degenerate region geometry"))?;
+        let c = least_squares(&a, train.len(), 6, &b)
+            .ok_or_else(|| Error::invalid("degenerate region geometry"))?;
         let m = mean(&b);
         for i in (0..n).filter(|&i| fold[i] == k) {
             let p: f64 = basis(xs[i], ys[i]).iter().zip(&c).map(|(a, b)| a * b).sum();
@@ -142,7 +163,11 @@ pub fn classify(plane: &Plane, rect: Rect, opts: &NoiseOptions, rng: &mut SplitM
     }
     r.rmse_const = (se_c / cnt as f64).sqrt();
     r.rmse_poly = (se_p / cnt as f64).sqrt();
-    r.verdict = if r.rmse_const > opts.nonuniform_ratio * r.rmse_poly { Verdict::NonUniform } else { Verdict::Accepted };
+    r.verdict = if r.rmse_const > opts.nonuniform_ratio * r.rmse_poly {
+        Verdict::NonUniform
+    } else {
+        Verdict::Accepted
+    };
     Ok(r)
 }
 
@@ -150,7 +175,10 @@ pub fn classify(plane: &Plane, rect: Rect, opts: &NoiseOptions, rng: &mut SplitM
 pub fn uniform_regions(plane: &Plane, opts: &NoiseOptions) -> Result<Vec<Region>> {
     let s = opts.region_px;
     if s < 2 || plane.width < s || plane.height < s {
-        return Err(Error::invalid(format!("noise regions of {s} px do not fit a {}×{} image", plane.width, plane.height)));
+        return Err(Error::invalid(format!(
+            "noise regions of {s} px do not fit a {}×{} image",
+            plane.width, plane.height
+        )));
     }
     if !(opts.conversion_gain_dv_per_e > 0.0) {
         return Err(Error::invalid("conversion gain must be > 0 DV/e-"));
@@ -166,15 +194,38 @@ pub fn uniform_regions(plane: &Plane, opts: &NoiseOptions) -> Result<Vec<Region>
 }
 
 /// Figures, the std-vs-mean scatter and the accepted regions.
-pub fn measure(plane: &Plane, opts: &NoiseOptions, measurement: &str) -> Result<(Measured, Vec<Region>)> {
+pub fn measure(
+    plane: &Plane,
+    opts: &NoiseOptions,
+    measurement: &str,
+) -> Result<(Measured, Vec<Region>)> {
     let regions = uniform_regions(plane, opts)?;
-    let acc: Vec<&Region> = regions.iter().filter(|r| r.verdict == Verdict::Accepted).collect();
-    let mut figures = vec![Figure::new(measurement, "regions_accepted", "1", acc.len() as f64, 0.0)];
+    let acc: Vec<&Region> = regions
+        .iter()
+        .filter(|r| r.verdict == Verdict::Accepted)
+        .collect();
+    // Binomial standard error of the accepted count.
+    let p_acc = acc.len() as f64 / regions.len().max(1) as f64;
+    let se_count = (regions.len() as f64 * p_acc * (1.0 - p_acc)).sqrt();
+    let mut figures = vec![Figure::new(
+        measurement,
+        "regions_accepted",
+        "1",
+        acc.len() as f64,
+        se_count,
+    )];
     let means: Vec<f64> = acc.iter().map(|r| r.mean_dv).collect();
     let stds: Vec<f64> = acc.iter().map(|r| r.std_dv).collect();
-    if let Some((a, b, sa, sb)) = line_fit(&means, &stds.iter().map(|s| s * s).collect::<Vec<_>>()) {
+    if let Some((a, b, sa, sb)) = line_fit(&means, &stds.iter().map(|s| s * s).collect::<Vec<_>>())
+    {
         figures.push(Figure::new(measurement, "variance_slope", "DV/e-", b, sb));
-        figures.push(Figure::new(measurement, "variance_intercept", "DV^2", a, sa));
+        figures.push(Figure::new(
+            measurement,
+            "variance_intercept",
+            "DV^2",
+            a,
+            sa,
+        ));
     }
     if !acc.is_empty() {
         figures.push(Figure::new(
@@ -182,10 +233,28 @@ pub fn measure(plane: &Plane, opts: &NoiseOptions, measurement: &str) -> Result<
             "std_mean",
             "DV",
             mean(&stds),
-            if stds.len() > 1 { std_dev(&stds) / (stds.len() as f64).sqrt() } else { 0.0 },
+            if stds.len() > 1 {
+                std_dev(&stds) / (stds.len() as f64).sqrt()
+            } else {
+                0.0
+            },
         ));
     }
-    let curves = vec![Curve::new("std_vs_mean", ("mean", "DV"), ("std", "DV"), means, stds, vec![])];
+    let curves = vec![Curve::new(
+        "std_vs_mean",
+        ("mean", "DV"),
+        ("std", "DV"),
+        means,
+        stds,
+        vec![],
+    )];
     let pixels_read = acc.iter().map(|r| r.rect).collect();
-    Ok((Measured { figures, curves, pixels_read }, regions))
+    Ok((
+        Measured {
+            figures,
+            curves,
+            pixels_read,
+        },
+        regions,
+    ))
 }

@@ -22,21 +22,42 @@ impl Plane {
     /// A single-channel plane; errors on a size mismatch or non-finite values.
     pub fn new(width: usize, height: usize, data: Vec<f64>) -> Result<Self> {
         if data.len() != width * height {
-            return Err(Error::invalid(format!("plane of {width}×{height} needs {} values, got {}", width * height, data.len())));
+            return Err(Error::invalid(format!(
+                "plane of {width}×{height} needs {} values, got {}",
+                width * height,
+                data.len()
+            )));
         }
         if let Some(i) = data.iter().position(|v| !v.is_finite()) {
-            return Err(Error::invalid(format!("non-finite value at pixel ({}, {})", i % width.max(1), i / width.max(1))));
+            return Err(Error::invalid(format!(
+                "non-finite value at pixel ({}, {})",
+                i % width.max(1),
+                i / width.max(1)
+            )));
         }
-        Ok(Self { width, height, data, channel: vec![], channel_names: vec![] })
+        Ok(Self {
+            width,
+            height,
+            data,
+            channel: vec![],
+            channel_names: vec![],
+        })
     }
 
     /// The raw mosaic of a sensor image, black level subtracted (DV).
     pub fn from_sensor(img: &SensorImage) -> Result<Self> {
         let (w, h) = (img.width() as usize, img.height() as usize);
-        let data: Vec<f64> = img.dv.iter().map(|&v| v as f64 - img.black_level_dv).collect();
+        let data: Vec<f64> = img
+            .dv
+            .iter()
+            .map(|&v| v as f64 - img.black_level_dv)
+            .collect();
         let mut p = Plane::new(w, h, data)?;
         if img.cfa.cells.len() > 1 {
-            p.channel = (0..h).flat_map(|y| (0..w).map(move |x| (x, y))).map(|(x, y)| img.channel_at(x as u32, y as u32) as u8).collect();
+            p.channel = (0..h)
+                .flat_map(|y| (0..w).map(move |x| (x, y)))
+                .map(|(x, y)| img.channel_at(x as u32, y as u32) as u8)
+                .collect();
             p.channel_names = img.cfa.channels.clone();
         }
         Ok(p)
@@ -53,7 +74,10 @@ impl Plane {
     }
     /// Index of a channel name ("r", "g", "b", …).
     pub fn channel_index(&self, name: &str) -> Option<u8> {
-        self.channel_names.iter().position(|c| c == name).map(|i| i as u8)
+        self.channel_names
+            .iter()
+            .position(|c| c == name)
+            .map(|i| i as u8)
     }
 
     /// The sub-plane inside `r` (which must lie inside the plane).
@@ -70,10 +94,17 @@ impl Plane {
         for y in y0..y0 + h {
             data.extend_from_slice(&self.data[y * self.width + x0..y * self.width + x0 + w]);
             if self.is_mosaic() {
-                channel.extend_from_slice(&self.channel[y * self.width + x0..y * self.width + x0 + w]);
+                channel
+                    .extend_from_slice(&self.channel[y * self.width + x0..y * self.width + x0 + w]);
             }
         }
-        Ok(Plane { width: w, height: h, data, channel, channel_names: self.channel_names.clone() })
+        Ok(Plane {
+            width: w,
+            height: h,
+            data,
+            channel,
+            channel_names: self.channel_names.clone(),
+        })
     }
 
     /// Swap rows and columns.
@@ -89,18 +120,32 @@ impl Plane {
                 }
             }
         }
-        Plane { width: h, height: w, data, channel, channel_names: self.channel_names.clone() }
+        Plane {
+            width: h,
+            height: w,
+            data,
+            channel,
+            channel_names: self.channel_names.clone(),
+        }
     }
 }
 
 /// Parse "x,y,w,h" (pixels).
 pub fn parse_rect(s: &str) -> Result<Rect> {
     let v: Vec<&str> = s.split(',').map(|t| t.trim()).collect();
-    let bad = || Error::invalid(format!("bad region '{s}': expected x,y,w,h in whole pixels, e.g. 10,20,64,80"));
+    let bad = || {
+        Error::invalid(format!(
+            "bad region '{s}': expected x,y,w,h in whole pixels, e.g. 10,20,64,80"
+        ))
+    };
     if v.len() != 4 {
         return Err(bad());
     }
-    let n: Vec<u32> = v.iter().map(|t| t.parse::<u32>()).collect::<std::result::Result<_, _>>().map_err(|_| bad())?;
+    let n: Vec<u32> = v
+        .iter()
+        .map(|t| t.parse::<u32>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| bad())?;
     if n[2] == 0 || n[3] == 0 {
         return Err(bad());
     }
@@ -147,15 +192,35 @@ impl ChannelView<'_> {
 /// (one view named `single_name`).
 pub fn channel_views<'a>(plane: &'a Plane, single_name: &'a str) -> Vec<ChannelView<'a>> {
     if plane.is_mosaic() {
-        plane.channel_names.iter().enumerate().map(|(i, n)| ChannelView { name: n, plane, index: Some(i as u8) }).collect()
+        plane
+            .channel_names
+            .iter()
+            .enumerate()
+            .map(|(i, n)| ChannelView {
+                name: n,
+                plane,
+                index: Some(i as u8),
+            })
+            .collect()
     } else {
-        vec![ChannelView { name: single_name, plane, index: None }]
+        vec![ChannelView {
+            name: single_name,
+            plane,
+            index: None,
+        }]
     }
 }
 
 /// Views of separate full planes, e.g. the R, G, B planes of an RGB image.
 pub fn plane_views(planes: &[(String, Plane)]) -> Vec<ChannelView<'_>> {
-    planes.iter().map(|(n, p)| ChannelView { name: n, plane: p, index: None }).collect()
+    planes
+        .iter()
+        .map(|(n, p)| ChannelView {
+            name: n,
+            plane: p,
+            index: None,
+        })
+        .collect()
 }
 
 /// Label ids of named objects; errors name the missing object and suggest the nearest.
@@ -163,12 +228,16 @@ pub fn label_ids(label_names: &[String], objects: &[String]) -> Result<Vec<u32>>
     objects
         .iter()
         .map(|o| {
-            label_names.iter().position(|n| n == o).map(|i| i as u32).ok_or_else(|| {
-                let hint = crate::diag::did_you_mean(o, label_names.iter().map(|s| s.as_str()))
-                    .map(|s| format!("; did you mean '{s}'?"))
-                    .unwrap_or_default();
-                Error::invalid(format!("no object labelled '{o}' in the image{hint}"))
-            })
+            label_names
+                .iter()
+                .position(|n| n == o)
+                .map(|i| i as u32)
+                .ok_or_else(|| {
+                    let hint = crate::diag::did_you_mean(o, label_names.iter().map(|s| s.as_str()))
+                        .map(|s| format!("; did you mean '{s}'?"))
+                        .unwrap_or_default();
+                    Error::invalid(format!("no object labelled '{o}' in the image{hint}"))
+                })
         })
         .collect()
 }

@@ -28,7 +28,12 @@ pub struct ProfileOptions {
 
 impl Default for ProfileOptions {
     fn default() -> Self {
-        Self { band_px: 4, vertical: false, ratios: vec![("g".into(), "r".into())], step_px: 2 }
+        Self {
+            band_px: 4,
+            vertical: false,
+            ratios: vec![("g".into(), "r".into())],
+            step_px: 2,
+        }
     }
 }
 
@@ -41,10 +46,15 @@ pub fn profile(
     opts: &ProfileOptions,
     measurement: &str,
 ) -> Result<Measured> {
-    let plane = views.first().ok_or_else(|| Error::invalid("profile: no channels"))?.plane;
+    let plane = views
+        .first()
+        .ok_or_else(|| Error::invalid("profile: no channels"))?
+        .plane;
     let (w, h) = (plane.width, plane.height);
     if labels.len() != w * h {
-        return Err(Error::invalid("profile needs per-pixel object labels (the image carries none)"));
+        return Err(Error::invalid(
+            "profile needs per-pixel object labels (the image carries none)",
+        ));
     }
     let ids = label_ids(label_names, objects)?;
     // Coordinates along (s) and across (t) the line.
@@ -63,12 +73,16 @@ pub fn profile(
         }
     }
     if cnt == 0 {
-        return Err(Error::invalid(format!("objects {} cover no pixel of the image", objects.join(", "))));
+        return Err(Error::invalid(format!(
+            "objects {} cover no pixel of the image",
+            objects.join(", ")
+        )));
     }
     let step = opts.step_px.max(1);
     let band = opts.band_px.max(1).div_ceil(step) * step;
     let tc = tsum / cnt as f64;
-    let t0 = ((tc - band as f64 / 2.0).round().max(0.0) as usize / step * step).min(nt.saturating_sub(band));
+    let t0 = ((tc - band as f64 / 2.0).round().max(0.0) as usize / step * step)
+        .min(nt.saturating_sub(band));
     let t1 = (t0 + band).min(nt);
     let s0 = s0 / step * step;
     let mut curves = vec![];
@@ -81,19 +95,50 @@ pub fn profile(
         let mut ys = vec![];
         let mut ses = vec![];
         for s in (s0..=s1).step_by(step) {
-            let vals: Vec<f64> =
-                (t0..t1).flat_map(|t| (s..(s + step).min(ns)).map(move |ss| (ss, t))).filter_map(|(ss, t)| { let (x, y) = at(ss, t); v.value(x, y) }).collect();
-            ys.push(if vals.is_empty() { f64::NAN } else { mean(&vals) });
-            ses.push(if vals.len() > 1 { std_dev(&vals) / (vals.len() as f64).sqrt() } else { 0.0 });
+            let vals: Vec<f64> = (t0..t1)
+                .flat_map(|t| (s..(s + step).min(ns)).map(move |ss| (ss, t)))
+                .filter_map(|(ss, t)| {
+                    let (x, y) = at(ss, t);
+                    v.value(x, y)
+                })
+                .collect();
+            ys.push(if vals.is_empty() {
+                f64::NAN
+            } else {
+                mean(&vals)
+            });
+            ses.push(if vals.len() > 1 {
+                std_dev(&vals) / (vals.len() as f64).sqrt()
+            } else {
+                0.0
+            });
         }
         series.push(ys.clone());
-        curves.push(Curve::new(&format!("profile/{}", v.name), ("position", "px"), (v.name, "DV"), xs.clone(), ys, ses));
+        curves.push(Curve::new(
+            &format!("profile/{}", v.name),
+            ("position", "px"),
+            (v.name, "DV"),
+            xs.clone(),
+            ys,
+            ses,
+        ));
     }
     let idx = |n: &str| views.iter().position(|v| v.name == n);
     for (a, b) in &opts.ratios {
         if let (Some(ia), Some(ib)) = (idx(a), idx(b)) {
-            let r: Vec<f64> = series[ia].iter().zip(&series[ib]).map(|(p, q)| p / q).collect();
-            curves.push(Curve::new(&format!("ratio/{a}/{b}"), ("position", "px"), (&format!("{a}/{b}"), "1"), xs.clone(), r, vec![]));
+            let r: Vec<f64> = series[ia]
+                .iter()
+                .zip(&series[ib])
+                .map(|(p, q)| p / q)
+                .collect();
+            curves.push(Curve::new(
+                &format!("ratio/{a}/{b}"),
+                ("position", "px"),
+                (&format!("{a}/{b}"), "1"),
+                xs.clone(),
+                r,
+                vec![],
+            ));
         }
     }
     // Per-object channel means inside the band.
@@ -109,10 +154,19 @@ pub fn profile(
                 })
                 .collect();
             if vals.len() < 2 {
-                return Err(Error::invalid(format!("object '{o}' has fewer than 2 '{}' pixels on the profile band", v.name)));
+                return Err(Error::invalid(format!(
+                    "object '{o}' has fewer than 2 '{}' pixels on the profile band",
+                    v.name
+                )));
             }
             let (m, se) = (mean(&vals), std_dev(&vals) / (vals.len() as f64).sqrt());
-            figures.push(Figure::new(measurement, format!("{o}/{}_mean", v.name), "DV", m, se));
+            figures.push(Figure::new(
+                measurement,
+                format!("{o}/{}_mean", v.name),
+                "DV",
+                m,
+                se,
+            ));
             means.push((v.name.to_string(), m, se));
         }
         for (a, b) in &opts.ratios {
@@ -130,5 +184,9 @@ pub fn profile(
     } else {
         Rect::new(s0 as u32, t0 as u32, (s1 + 1 - s0) as u32, (t1 - t0) as u32)
     };
-    Ok(Measured { figures, curves, pixels_read: vec![rect] })
+    Ok(Measured {
+        figures,
+        curves,
+        pixels_read: vec![rect],
+    })
 }

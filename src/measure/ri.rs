@@ -27,22 +27,42 @@ pub struct RiOptions {
 
 impl Default for RiOptions {
     fn default() -> Self {
-        Self { center_px: None, pixel_pitch_m: None, bins: 20, channel: "g".into() }
+        Self {
+            center_px: None,
+            pixel_pitch_m: None,
+            bins: 20,
+            channel: "g".into(),
+        }
     }
 }
 
 /// RI curve (field height in mm when the pitch is known, else px) and figures
 /// `ri@max` (outermost annulus) and `ri@half` (annulus holding half the maximum field height).
-pub fn relative_illumination(plane: &Plane, opts: &RiOptions, measurement: &str) -> Result<Measured> {
-    let (cx, cy) = opts.center_px.unwrap_or((plane.width as f64 / 2.0, plane.height as f64 / 2.0));
-    let ch = if plane.is_mosaic() {
-        Some(plane.channel_index(&opts.channel).ok_or_else(|| Error::invalid(format!("channel '{}' not in the CFA", opts.channel)))?)
-    } else {
-        None
-    };
+pub fn relative_illumination(
+    plane: &Plane,
+    opts: &RiOptions,
+    measurement: &str,
+) -> Result<Measured> {
+    let (cx, cy) = opts
+        .center_px
+        .unwrap_or((plane.width as f64 / 2.0, plane.height as f64 / 2.0));
+    let ch =
+        if plane.is_mosaic() {
+            Some(plane.channel_index(&opts.channel).ok_or_else(|| {
+                Error::invalid(format!("channel '{}' not in the CFA", opts.channel))
+            })?)
+        } else {
+            None
+        };
     let nb = opts.bins.max(2);
-    let r_of = |x: usize, y: usize| ((x as f64 + 0.5 - cx).powi(2) + (y as f64 + 0.5 - cy).powi(2)).sqrt();
-    let corners = [(0, 0), (plane.width - 1, 0), (0, plane.height - 1), (plane.width - 1, plane.height - 1)];
+    let r_of =
+        |x: usize, y: usize| ((x as f64 + 0.5 - cx).powi(2) + (y as f64 + 0.5 - cy).powi(2)).sqrt();
+    let corners = [
+        (0, 0),
+        (plane.width - 1, 0),
+        (0, plane.height - 1),
+        (plane.width - 1, plane.height - 1),
+    ];
     let r_max = corners.iter().map(|&(x, y)| r_of(x, y)).fold(0.0, f64::max) * (1.0 + 1e-9);
     let mut bins: Vec<Vec<f64>> = vec![vec![]; nb];
     for y in 0..plane.height {
@@ -55,11 +75,17 @@ pub fn relative_illumination(plane: &Plane, opts: &RiOptions, measurement: &str)
     }
     let m0 = mean(&bins[0]);
     if bins[0].len() < 2 || !(m0 > 0.0) {
-        return Err(Error::invalid("flat field: the central annulus is empty or not brighter than the black level"));
+        return Err(Error::invalid(
+            "flat field: the central annulus is empty or not brighter than the black level",
+        ));
     }
     let se0 = std_dev(&bins[0]) / (bins[0].len() as f64).sqrt() / m0;
     let scale = opts.pixel_pitch_m.map(|p| p * 1e3).unwrap_or(1.0);
-    let unit = if opts.pixel_pitch_m.is_some() { "mm" } else { "px" };
+    let unit = if opts.pixel_pitch_m.is_some() {
+        "mm"
+    } else {
+        "px"
+    };
     let (mut xs, mut ys, mut ses) = (vec![], vec![], vec![]);
     for (i, b) in bins.iter().enumerate() {
         if b.len() < 2 {
@@ -70,10 +96,17 @@ pub fn relative_illumination(plane: &Plane, opts: &RiOptions, measurement: &str)
         let rel = std_dev(b) / (b.len() as f64).sqrt() / m;
         xs.push((i as f64 + 0.5) / nb as f64 * r_max * scale);
         ys.push(ri);
-        ses.push(if i == 0 { ri * se0 } else { ri.abs() * (rel * rel + se0 * se0).sqrt() });
+        ses.push(if i == 0 {
+            ri * se0
+        } else {
+            ri.abs() * (rel * rel + se0 * se0).sqrt()
+        });
     }
     let last = ys.len() - 1;
-    let half = xs.iter().position(|&x| x >= 0.5 * r_max * scale).unwrap_or(last);
+    let half = xs
+        .iter()
+        .position(|&x| x >= 0.5 * r_max * scale)
+        .unwrap_or(last);
     let figures = vec![
         Figure::new(measurement, "ri@max", "1", ys[last], ses[last]),
         Figure::new(measurement, "ri@half", "1", ys[half], ses[half]),
@@ -81,7 +114,14 @@ pub fn relative_illumination(plane: &Plane, opts: &RiOptions, measurement: &str)
     ];
     Ok(Measured {
         figures,
-        curves: vec![Curve::new("ri", ("field height", unit), ("relative illumination", "1"), xs, ys, ses)],
+        curves: vec![Curve::new(
+            "ri",
+            ("field height", unit),
+            ("relative illumination", "1"),
+            xs,
+            ys,
+            ses,
+        )],
         pixels_read: vec![Rect::new(0, 0, plane.width as u32, plane.height as u32)],
     })
 }
@@ -101,7 +141,15 @@ mod tests {
             }
         }
         let p = Plane::new(w, h, d).unwrap();
-        let m = relative_illumination(&p, &RiOptions { bins: 30, ..Default::default() }, "ri").unwrap();
+        let m = relative_illumination(
+            &p,
+            &RiOptions {
+                bins: 30,
+                ..Default::default()
+            },
+            "ri",
+        )
+        .unwrap();
         let c = &m.curves[0];
         for (x, y) in c.x.iter().zip(&c.y).skip(1) {
             let truth = 1.0 / (1.0 + x * x / 1e4).powi(2);

@@ -68,7 +68,9 @@ impl SfrChannel {
         match s.to_ascii_lowercase().as_str() {
             "lum" | "y" | "luminance" => Ok(SfrChannel::Lum),
             c @ ("r" | "g" | "b" | "w") => Ok(SfrChannel::Named(c.to_string())),
-            _ => Err(Error::invalid(format!("unknown channel '{s}': expected lum, r, g or b"))),
+            _ => Err(Error::invalid(format!(
+                "unknown channel '{s}': expected lum, r, g or b"
+            ))),
         }
     }
 }
@@ -88,7 +90,13 @@ pub struct SfrOptions {
 
 impl Default for SfrOptions {
     fn default() -> Self {
-        Self { channel: SfrChannel::Lum, fit_degree: 1, pixel_pitch_m: None, jackknife_groups: 8, max_freq_cy_per_px: 1.0 }
+        Self {
+            channel: SfrChannel::Lum,
+            fit_degree: 1,
+            pixel_pitch_m: None,
+            jackknife_groups: 8,
+            max_freq_cy_per_px: 1.0,
+        }
     }
 }
 
@@ -109,6 +117,7 @@ pub struct Sfr {
     /// horizontal when `transposed`), degrees.
     pub edge_angle_deg: f64,
     pub edge_angle_stderr_deg: f64,
+    pub lsf_fwhm_stderr_px: f64,
     pub rows_used: usize,
     pub transposed: bool,
     pub pixel_pitch_m: Option<f64>,
@@ -136,23 +145,66 @@ impl Sfr {
     pub fn measured(&self, measurement: &str, roi: Rect) -> Measured {
         let mut figures = vec![];
         if let Some(m50) = self.mtf50_cy_per_px {
-            figures.push(Figure::new(measurement, "mtf50", "cy/px", m50, self.mtf50_stderr));
+            figures.push(Figure::new(
+                measurement,
+                "mtf50",
+                "cy/px",
+                m50,
+                self.mtf50_stderr,
+            ));
             if let Some(p) = self.pixel_pitch_m {
                 let p_mm = p * 1e3;
-                figures.push(Figure::new(measurement, "mtf50_mm", "cy/mm", m50 / p_mm, self.mtf50_stderr / p_mm));
+                figures.push(Figure::new(
+                    measurement,
+                    "mtf50_mm",
+                    "cy/mm",
+                    m50 / p_mm,
+                    self.mtf50_stderr / p_mm,
+                ));
             }
         }
         for f in [0.125, 0.25, 0.5] {
             if let Some((m, se)) = self.mtf_at(f) {
-                figures.push(Figure::new(measurement, format!("mtf@{f}cy/px"), "1", m, se));
+                figures.push(Figure::new(
+                    measurement,
+                    format!("mtf@{f}cy/px"),
+                    "1",
+                    m,
+                    se,
+                ));
             }
         }
-        figures.push(Figure::new(measurement, "edge_angle", "deg", self.edge_angle_deg, self.edge_angle_stderr_deg));
-        let lsf_w = self.lsf_fwhm_px();
-        figures.push(Figure::new(measurement, "lsf_fwhm", "px", lsf_w, 0.0));
+        figures.push(Figure::new(
+            measurement,
+            "edge_angle",
+            "deg",
+            self.edge_angle_deg,
+            self.edge_angle_stderr_deg,
+        ));
+        figures.push(Figure::new(
+            measurement,
+            "lsf_fwhm",
+            "px",
+            self.lsf_fwhm_px(),
+            self.lsf_fwhm_stderr_px,
+        ));
         let curves = vec![
-            Curve::new("esf", ("distance", "px"), ("esf", "input"), self.esf_x_px.clone(), self.esf.clone(), vec![]),
-            Curve::new("lsf", ("distance", "px"), ("lsf", "1/px"), self.esf_x_px.clone(), self.lsf.clone(), vec![]),
+            Curve::new(
+                "esf",
+                ("distance", "px"),
+                ("esf", "input"),
+                self.esf_x_px.clone(),
+                self.esf.clone(),
+                vec![],
+            ),
+            Curve::new(
+                "lsf",
+                ("distance", "px"),
+                ("lsf", "1/px"),
+                self.esf_x_px.clone(),
+                self.lsf.clone(),
+                vec![],
+            ),
             Curve::new(
                 "mtf",
                 ("frequency", "cy/px"),
@@ -162,38 +214,50 @@ impl Sfr {
                 self.mtf_stderr.clone(),
             ),
         ];
-        Measured { figures, curves, pixels_read: vec![roi] }
+        Measured {
+            figures,
+            curves,
+            pixels_read: vec![roi],
+        }
     }
 
     /// Full width at half maximum of the LSF, px (linear interpolation).
     pub fn lsf_fwhm_px(&self) -> f64 {
-        let (imax, &peak) = self.lsf.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).unwrap_or((0, &0.0));
-        let half = 0.5 * peak;
-        let x = &self.esf_x_px;
-        let mut left = x[0];
-        for i in (1..=imax).rev() {
-            if self.lsf[i - 1] < half {
-                let t = (half - self.lsf[i - 1]) / (self.lsf[i] - self.lsf[i - 1]);
-                left = x[i - 1] + t * (x[i] - x[i - 1]);
-                break;
-            }
-        }
-        let mut right = x[x.len() - 1];
-        for i in imax..self.lsf.len() - 1 {
-            if self.lsf[i + 1] < half {
-                let t = (self.lsf[i] - half) / (self.lsf[i] - self.lsf[i + 1]);
-                right = x[i] + t * (x[i + 1] - x[i]);
-                break;
-            }
-        }
-        right - left
+        fwhm(&self.esf_x_px, &self.lsf)
     }
+}
+
+/// Full width at half maximum of `y(x)`, linear interpolation between samples.
+fn fwhm(x: &[f64], y: &[f64]) -> f64 {
+    let (imax, &peak) = y
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .unwrap_or((0, &0.0));
+    let half = 0.5 * peak;
+    let mut left = x[0];
+    for i in (1..=imax).rev() {
+        if y[i - 1] < half {
+            left = x[i - 1] + (half - y[i - 1]) / (y[i] - y[i - 1]) * (x[i] - x[i - 1]);
+            break;
+        }
+    }
+    let mut right = x[x.len() - 1];
+    for i in imax..y.len() - 1 {
+        if y[i + 1] < half {
+            right = x[i] + (y[i] - half) / (y[i] - y[i + 1]) * (x[i + 1] - x[i]);
+            break;
+        }
+    }
+    right - left
 }
 
 /// Asymmetric Hamming window of `n` points peaking at `mid` (sfrmat `ahamming`).
 fn ahamming(n: usize, mid: f64) -> Vec<f64> {
     let wid = mid.max(n as f64 - 1.0 - mid).max(1.0);
-    (0..n).map(|i| 0.54 + 0.46 * (std::f64::consts::PI * (i as f64 - mid) / wid).cos()).collect()
+    (0..n)
+        .map(|i| 0.54 + 0.46 * (std::f64::consts::PI * (i as f64 - mid) / wid).cos())
+        .collect()
 }
 
 /// A polynomial x(y) in the scaled variable t = (y − y0)/ys.
@@ -211,8 +275,15 @@ impl EdgeFit {
             return None;
         }
         let y0 = ys_.iter().sum::<f64>() / n as f64;
-        let ys = ys_.iter().map(|y| (y - y0).abs()).fold(0.0, f64::max).max(1.0);
-        let a: Vec<f64> = ys_.iter().flat_map(|y| (0..=degree).map(move |k| ((y - y0) / ys).powi(k as i32))).collect();
+        let ys = ys_
+            .iter()
+            .map(|y| (y - y0).abs())
+            .fold(0.0, f64::max)
+            .max(1.0);
+        let a: Vec<f64> = ys_
+            .iter()
+            .flat_map(|y| (0..=degree).map(move |k| ((y - y0) / ys).powi(k as i32)))
+            .collect();
         let c = least_squares(&a, n, degree + 1, xs)?;
         Some(Self { c, y0, ys })
     }
@@ -223,7 +294,13 @@ impl EdgeFit {
     /// dx/dy.
     fn slope(&self, y: f64) -> f64 {
         let t = (y - self.y0) / self.ys;
-        let d = self.c.iter().enumerate().skip(1).rev().fold(0.0, |acc, (k, &c)| acc * t + k as f64 * c);
+        let d = self
+            .c
+            .iter()
+            .enumerate()
+            .skip(1)
+            .rev()
+            .fold(0.0, |acc, (k, &c)| acc * t + k as f64 * c);
         d / self.ys
     }
 }
@@ -297,14 +374,27 @@ struct Prepared<'a> {
 impl Prepared<'_> {
     fn value(&self, x: usize, y: usize) -> Option<f64> {
         let ch = self.plane.channel_at(x, y).unwrap_or(0) as usize;
-        self.select.get(ch).copied().flatten().map(|(g, o)| (self.plane.get(x, y) - o) * g)
+        self.select
+            .get(ch)
+            .copied()
+            .flatten()
+            .map(|(g, o)| (self.plane.get(x, y) - o) * g)
     }
 
     fn estimate(&self, rows: &[usize]) -> Option<Estimate> {
         let (lo, hi) = (*rows.first()? as f64, *rows.last()? as f64 + 1.0);
-        let keep: Vec<&(f64, f64)> =
-            self.centroids.iter().filter(|(y, _)| *y >= lo && *y <= hi && rows.binary_search(&(y.floor() as usize)).is_ok()).collect();
-        let fit = EdgeFit::fit(&keep.iter().map(|c| c.0).collect::<Vec<_>>(), &keep.iter().map(|c| c.1).collect::<Vec<_>>(), self.degree)?;
+        let keep: Vec<&(f64, f64)> = self
+            .centroids
+            .iter()
+            .filter(|(y, _)| {
+                *y >= lo && *y <= hi && rows.binary_search(&(y.floor() as usize)).is_ok()
+            })
+            .collect();
+        let fit = EdgeFit::fit(
+            &keep.iter().map(|c| c.0).collect::<Vec<_>>(),
+            &keep.iter().map(|c| c.1).collect::<Vec<_>>(),
+            self.degree,
+        )?;
         let ymid = 0.5 * (lo + hi - 1.0);
         let angle_deg = fit.slope(ymid).atan().to_degrees();
         let n = self.nbins;
@@ -339,7 +429,12 @@ impl Prepared<'_> {
         let sign = total.signum();
         lsf.iter_mut().for_each(|v| *v *= sign);
         let area: f64 = lsf.iter().sum::<f64>() * 0.25;
-        let centroid = lsf.iter().enumerate().map(|(i, v)| i as f64 * v).sum::<f64>() / lsf.iter().sum::<f64>();
+        let centroid = lsf
+            .iter()
+            .enumerate()
+            .map(|(i, v)| i as f64 * v)
+            .sum::<f64>()
+            / lsf.iter().sum::<f64>();
         let win = ahamming(n, centroid.clamp(0.0, n as f64 - 1.0));
         let lw: Vec<f64> = lsf.iter().zip(&win).map(|(a, b)| a * b).collect();
         let mut mtf = Vec::with_capacity(self.nfreq);
@@ -357,18 +452,30 @@ impl Prepared<'_> {
                 dc = mag;
             }
             // Derivative correction: central difference over ±1 bin responds sin(w)/w.
-            let corr = if m == 0 { 1.0 } else { (w / w.sin()).abs().min(10.0) };
+            let corr = if m == 0 {
+                1.0
+            } else {
+                (w / w.sin()).abs().min(10.0)
+            };
             mtf.push(mag / dc * corr);
         }
         let mtf50 = crossing(&mtf, 0.5).map(|i| i * 4.0 / n as f64);
         let lsf = lsf.iter().map(|v| v / area).collect();
-        Some(Estimate { mtf, mtf50, angle_deg, esf, lsf })
+        Some(Estimate {
+            mtf,
+            mtf50,
+            angle_deg,
+            esf,
+            lsf,
+        })
     }
 }
 
 /// Fractional index where `v` first falls below `level`.
 fn crossing(v: &[f64], level: f64) -> Option<f64> {
-    (1..v.len()).find(|&i| v[i] < level && v[i - 1] >= level).map(|i| (i - 1) as f64 + (v[i - 1] - level) / (v[i - 1] - v[i]))
+    (1..v.len())
+        .find(|&i| v[i] < level && v[i - 1] >= level)
+        .map(|i| (i - 1) as f64 + (v[i - 1] - level) / (v[i - 1] - v[i]))
 }
 
 /// Bin means, moved from the mean sample position of each bin to the bin
@@ -381,7 +488,10 @@ fn fill_bins(sum: &[f64], sum_d: &[f64], cnt: &[u32]) -> Option<Vec<f64>> {
         return None;
     }
     // (position in bins, mean value) of every non-empty bin.
-    let pts: Vec<(f64, f64)> = full.iter().map(|&i| (i as f64 + sum_d[i] / cnt[i] as f64, sum[i] / cnt[i] as f64)).collect();
+    let pts: Vec<(f64, f64)> = full
+        .iter()
+        .map(|&i| (i as f64 + sum_d[i] / cnt[i] as f64, sum[i] / cnt[i] as f64))
+        .collect();
     let interp = |x: f64| -> f64 {
         let j = pts.partition_point(|p| p.0 < x);
         if j == 0 {
@@ -399,10 +509,16 @@ fn fill_bins(sum: &[f64], sum_d: &[f64], cnt: &[u32]) -> Option<Vec<f64>> {
 /// e-SFR of the edge in `plane` (the whole plane is the region of interest).
 pub fn sfr(plane: &Plane, opts: &SfrOptions) -> Result<Sfr> {
     if plane.width < 8 || plane.height < 8 {
-        return Err(Error::invalid(format!("SFR region {}×{} px is too small (at least 8×8, ideally ≥ 32×32)", plane.width, plane.height)));
+        return Err(Error::invalid(format!(
+            "SFR region {}×{} px is too small (at least 8×8, ideally ≥ 32×32)",
+            plane.width, plane.height
+        )));
     }
     if !(1..=5).contains(&opts.fit_degree) {
-        return Err(Error::invalid(format!("edge fit degree {} not in 1…5", opts.fit_degree)));
+        return Err(Error::invalid(format!(
+            "edge fit degree {} not in 1…5",
+            opts.fit_degree
+        )));
     }
     let (lw, lh, ld, _) = locate_plane(plane);
     let (gx, gy) = gradient_energy(lw, lh, &ld);
@@ -417,15 +533,31 @@ pub fn sfr(plane: &Plane, opts: &SfrOptions) -> Result<Sfr> {
     let (lw, lh, ld, off) = locate_plane(p);
     let total: f64 = (0..lh).map(|y| ld[y * lw + lw - 1] - ld[y * lw]).sum();
     if total == 0.0 {
-        return Err(Error::invalid("no edge in the SFR region: dark and bright sides have the same level".to_string()));
+        return Err(Error::invalid(
+            "no edge in the SFR region: dark and bright sides have the same level".to_string(),
+        ));
     }
     let sign = total.signum();
     let rows: Vec<&[f64]> = (0..lh).map(|y| &ld[y * lw..(y + 1) * lw]).collect();
     // Pass 1: window centred in the row; fit; pass 2: window centred on the fit.
-    let pass1: Vec<(f64, f64)> =
-        rows.iter().enumerate().filter_map(|(y, r)| row_centroid(r, sign, None, off).map(|c| (y as f64 + off, c))).collect();
-    let fit_of = |c: &[(f64, f64)], deg| EdgeFit::fit(&c.iter().map(|v| v.0).collect::<Vec<_>>(), &c.iter().map(|v| v.1).collect::<Vec<_>>(), deg);
-    let no_edge = || Error::invalid("could not locate the edge in the SFR region (too few rows with an edge response)".to_string());
+    let pass1: Vec<(f64, f64)> = rows
+        .iter()
+        .enumerate()
+        .filter_map(|(y, r)| row_centroid(r, sign, None, off).map(|c| (y as f64 + off, c)))
+        .collect();
+    let fit_of = |c: &[(f64, f64)], deg| {
+        EdgeFit::fit(
+            &c.iter().map(|v| v.0).collect::<Vec<_>>(),
+            &c.iter().map(|v| v.1).collect::<Vec<_>>(),
+            deg,
+        )
+    };
+    let no_edge = || {
+        Error::invalid(
+            "could not locate the edge in the SFR region (too few rows with an edge response)"
+                .to_string(),
+        )
+    };
     let fit1 = fit_of(&pass1, opts.fit_degree).ok_or_else(no_edge)?;
     let centroids: Vec<(f64, f64)> = rows
         .iter()
@@ -454,16 +586,28 @@ pub fn sfr(plane: &Plane, opts: &SfrOptions) -> Result<Sfr> {
     let fmax = opts.max_freq_cy_per_px.clamp(0.01, 2.0);
     let nfreq = ((fmax * nbins as f64 / 4.0).floor() as usize + 1).min(nbins / 2 + 1);
     let nch = p.channel_names.len().max(1);
-    let mut prep = Prepared { plane: p, centroids, degree: opts.fit_degree, nbins, nfreq, select: vec![Some((1.0, 0.0)); nch] };
+    let mut prep = Prepared {
+        plane: p,
+        centroids,
+        degree: opts.fit_degree,
+        nbins,
+        nfreq,
+        select: vec![Some((1.0, 0.0)); nch],
+    };
     match (&opts.channel, p.is_mosaic()) {
         (SfrChannel::Named(c), true) => {
             let ci = p.channel_index(c).ok_or_else(|| {
-                Error::invalid(format!("channel '{c}' is not in the CFA (channels: {})", p.channel_names.join(", ")))
+                Error::invalid(format!(
+                    "channel '{c}' is not in the CFA (channels: {})",
+                    p.channel_names.join(", ")
+                ))
             })? as usize;
             prep.select = (0..nch).map(|i| (i == ci).then_some((1.0, 0.0))).collect();
         }
         (SfrChannel::Named(c), false) if c != "w" && c != "g" => {
-            return Err(Error::invalid(format!("channel '{c}' asked of a single-channel image; use --channel lum")));
+            return Err(Error::invalid(format!(
+                "channel '{c}' asked of a single-channel image; use --channel lum"
+            )));
         }
         (SfrChannel::Lum, true) => {
             // Per-channel plateau normalisation from the outer quarters of the region.
@@ -491,10 +635,15 @@ pub fn sfr(plane: &Plane, opts: &SfrOptions) -> Result<Sfr> {
                     }
                 }
                 let (l, hgh) = (median(&lo), median(&hi));
-                sel.push((lo.len() >= 4 && hi.len() >= 4 && (hgh - l).abs() > 0.0).then(|| (1.0 / (hgh - l), l)));
+                sel.push(
+                    (lo.len() >= 4 && hi.len() >= 4 && (hgh - l).abs() > 0.0)
+                        .then(|| (1.0 / (hgh - l), l)),
+                );
             }
             if sel.iter().all(|s| s.is_none()) {
-                return Err(Error::invalid("no CFA channel shows both edge plateaus; widen the SFR region".to_string()));
+                return Err(Error::invalid(
+                    "no CFA channel shows both edge plateaus; widen the SFR region".to_string(),
+                ));
             }
             prep.select = sel;
         }
@@ -503,12 +652,21 @@ pub fn sfr(plane: &Plane, opts: &SfrOptions) -> Result<Sfr> {
     let full = prep.estimate(&used).ok_or_else(no_edge)?;
     // Jackknife over contiguous row blocks.
     let g = opts.jackknife_groups.max(4).min(nlin / 2);
-    let (mut se_mtf, mut se50, mut se_ang) = (vec![0.0; full.mtf.len()], 0.0, 0.0);
+    let (mut se_mtf, mut se50, mut se_ang, mut se_fwhm) =
+        (vec![0.0; full.mtf.len()], 0.0, 0.0, 0.0);
+    let esf_x_px: Vec<f64> = (0..nbins)
+        .map(|i| (i as f64 + 0.5) / 4.0 - nbins as f64 / 8.0)
+        .collect();
     if g >= 4 {
         let reps: Vec<Estimate> = (0..g)
             .filter_map(|k| {
                 let (a, b) = (k * nlin / g, (k + 1) * nlin / g);
-                let rows: Vec<usize> = used.iter().enumerate().filter(|(i, _)| *i < a || *i >= b).map(|(_, &r)| r).collect();
+                let rows: Vec<usize> = used
+                    .iter()
+                    .enumerate()
+                    .filter(|(i, _)| *i < a || *i >= b)
+                    .map(|(_, &r)| r)
+                    .collect();
                 prep.estimate(&rows)
             })
             .collect();
@@ -517,13 +675,24 @@ pub fn sfr(plane: &Plane, opts: &SfrOptions) -> Result<Sfr> {
                 *s = jackknife_se(&reps.iter().map(|r| r.mtf[i]).collect::<Vec<_>>());
             }
             se_ang = jackknife_se(&reps.iter().map(|r| r.angle_deg).collect::<Vec<_>>());
+            se_fwhm = jackknife_se(
+                &reps
+                    .iter()
+                    .map(|r| fwhm(&esf_x_px, &r.lsf))
+                    .collect::<Vec<_>>(),
+            );
             let m50: Vec<f64> = reps.iter().filter_map(|r| r.mtf50).collect();
-            se50 = if m50.len() == g { jackknife_se(&m50) } else { f64::INFINITY };
+            se50 = if m50.len() == g {
+                jackknife_se(&m50)
+            } else {
+                f64::INFINITY
+            };
         }
     }
-    let esf_x_px = (0..nbins).map(|i| (i as f64 + 0.5) / 4.0 - nbins as f64 / 8.0).collect();
     Ok(Sfr {
-        freq_cy_per_px: (0..full.mtf.len()).map(|m| m as f64 * 4.0 / nbins as f64).collect(),
+        freq_cy_per_px: (0..full.mtf.len())
+            .map(|m| m as f64 * 4.0 / nbins as f64)
+            .collect(),
         mtf: full.mtf,
         mtf_stderr: se_mtf,
         esf_x_px,
@@ -533,6 +702,7 @@ pub fn sfr(plane: &Plane, opts: &SfrOptions) -> Result<Sfr> {
         mtf50_stderr: if se50.is_finite() { se50 } else { 0.0 },
         edge_angle_deg: full.angle_deg,
         edge_angle_stderr_deg: se_ang,
+        lsf_fwhm_stderr_px: se_fwhm,
         rows_used: nlin,
         transposed,
         pixel_pitch_m: opts.pixel_pitch_m,
@@ -553,15 +723,23 @@ mod tests {
     #[test]
     fn hamming_window_peaks_at_mid() {
         let w = ahamming(11, 5.0);
-        assert!((w[5] - 1.0).abs() < 1e-12 && (w[0] - 0.08).abs() < 1e-12 && (w[10] - 0.08).abs() < 1e-12);
+        assert!(
+            (w[5] - 1.0).abs() < 1e-12
+                && (w[0] - 0.08).abs() < 1e-12
+                && (w[10] - 0.08).abs() < 1e-12
+        );
     }
 
     #[test]
     fn rejects_flat_and_axis_aligned_edges() {
         let flat = Plane::new(32, 32, vec![1.0; 1024]).unwrap();
         assert!(sfr(&flat, &SfrOptions::default()).is_err());
-        let d: Vec<f64> = (0..32 * 32).map(|i| if i % 32 < 16 { 0.1 } else { 0.9 }).collect();
-        let e = sfr(&Plane::new(32, 32, d).unwrap(), &SfrOptions::default()).unwrap_err().to_string();
+        let d: Vec<f64> = (0..32 * 32)
+            .map(|i| if i % 32 < 16 { 0.1 } else { 0.9 })
+            .collect();
+        let e = sfr(&Plane::new(32, 32, d).unwrap(), &SfrOptions::default())
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("too close to the pixel grid"), "{e}");
     }
 }

@@ -24,7 +24,11 @@ pub fn median(v: &[f64]) -> f64 {
     let mut s = v.to_vec();
     s.sort_by(|a, b| a.total_cmp(b));
     let n = s.len();
-    if n % 2 == 1 { s[n / 2] } else { 0.5 * (s[n / 2 - 1] + s[n / 2]) }
+    if n % 2 == 1 {
+        s[n / 2]
+    } else {
+        0.5 * (s[n / 2 - 1] + s[n / 2])
+    }
 }
 
 /// Least-squares solution of `a·x ≈ b` (`a` row-major, `rows`×`cols`) by
@@ -37,7 +41,10 @@ pub fn least_squares(a: &[f64], rows: usize, cols: usize, b: &[f64]) -> Option<V
     let mut y = b.to_vec();
     let scale: f64 = m.iter().fold(0.0, |s, v| s.max(v.abs()));
     for k in 0..cols {
-        let norm: f64 = (k..rows).map(|i| m[i * cols + k].powi(2)).sum::<f64>().sqrt();
+        let norm: f64 = (k..rows)
+            .map(|i| m[i * cols + k].powi(2))
+            .sum::<f64>()
+            .sqrt();
         if norm <= 1e-12 * scale.max(1e-300) {
             return None;
         }
@@ -91,7 +98,9 @@ mod tests {
         let a: Vec<f64> = xs.iter().flat_map(|&x| [1.0, x, x * x]).collect();
         let b: Vec<f64> = xs.iter().map(|&x| 2.0 + 3.0 * x - x * x).collect();
         let c = least_squares(&a, 6, 3, &b).unwrap();
-        assert!((c[0] - 2.0).abs() < 1e-12 && (c[1] - 3.0).abs() < 1e-12 && (c[2] + 1.0).abs() < 1e-12);
+        assert!(
+            (c[0] - 2.0).abs() < 1e-12 && (c[1] - 3.0).abs() < 1e-12 && (c[2] + 1.0).abs() < 1e-12
+        );
         assert!(least_squares(&[1.0, 1.0, 1.0, 1.0], 2, 2, &[1.0, 2.0]).is_none());
     }
 }
@@ -135,9 +144,19 @@ pub fn line_fit(x: &[f64], y: &[f64]) -> Option<(f64, f64, f64, f64)> {
     if sxx <= 0.0 {
         return None;
     }
-    let b = x.iter().zip(y).map(|(a, c)| (a - mx) * (c - my)).sum::<f64>() / sxx;
+    let b = x
+        .iter()
+        .zip(y)
+        .map(|(a, c)| (a - mx) * (c - my))
+        .sum::<f64>()
+        / sxx;
     let a = my - b * mx;
-    let s2 = x.iter().zip(y).map(|(xi, yi)| (yi - a - b * xi).powi(2)).sum::<f64>() / (n - 2) as f64;
+    let s2 = x
+        .iter()
+        .zip(y)
+        .map(|(xi, yi)| (yi - a - b * xi).powi(2))
+        .sum::<f64>()
+        / (n - 2) as f64;
     let se_b = (s2 / sxx).sqrt();
     let se_a = (s2 * (1.0 / n as f64 + mx * mx / sxx)).sqrt();
     Some((a, b, se_a, se_b))

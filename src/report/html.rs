@@ -6,7 +6,9 @@
 //! Plots: every curve name of a measurement becomes one chart with one
 //! series per variant (curves named `*_vs_time` on log–log axes; `scatter`
 //! with the identity line; `std_vs_mean` as points). When the variants sweep a
-//! numeric parameter, each figure is also plotted against it, with ±1 se.
+//! numeric parameter, each figure of a measurement with at most 10 figures is
+//! also plotted against it, with ±1 se. Tables have a row per variant, or a
+//! row per quantity when a measurement has more than 10 (e.g. MCC means).
 
 use super::plot::{PlotSpec, Series, drawable_points, plot_svg};
 use super::results::{ResultRow, read_curves, read_results};
@@ -24,9 +26,13 @@ pub(crate) const DIFF: &str = include_str!("templates/diff.html");
 /// Render one of the embedded templates with `ctx`.
 pub(crate) fn render(name: &str, src: &str, ctx: minijinja::Value) -> Result<String> {
     let mut env = minijinja::Environment::new();
-    env.add_template(name, src).map_err(|e| Error::invalid(format!("template {name}: {e}")))?;
-    let t = env.get_template(name).map_err(|e| Error::invalid(format!("template {name}: {e}")))?;
-    t.render(ctx).map_err(|e| Error::invalid(format!("template {name}: {e}")))
+    env.add_template(name, src)
+        .map_err(|e| Error::invalid(format!("template {name}: {e}")))?;
+    let t = env
+        .get_template(name)
+        .map_err(|e| Error::invalid(format!("template {name}: {e}")))?;
+    t.render(ctx)
+        .map_err(|e| Error::invalid(format!("template {name}: {e}")))
 }
 
 pub(crate) fn css() -> &'static str {
@@ -48,7 +54,11 @@ pub fn fmt_num(v: f64) -> String {
     if (1e-3..1e6).contains(&a) {
         let dec = (4 - a.log10().floor() as i32).clamp(0, 8) as usize;
         let s = format!("{v:.dec$}");
-        if s.contains('.') { s.trim_end_matches('0').trim_end_matches('.').to_string() } else { s }
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s
+        }
     } else {
         format!("{v:.4e}")
     }
@@ -72,7 +82,9 @@ fn base64(bytes: &[u8]) -> String {
     const T: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
     let mut s = String::with_capacity(bytes.len().div_ceil(3) * 4);
     for c in bytes.chunks(3) {
-        let n = (c[0] as u32) << 16 | (*c.get(1).unwrap_or(&0) as u32) << 8 | *c.get(2).unwrap_or(&0) as u32;
+        let n = (c[0] as u32) << 16
+            | (*c.get(1).unwrap_or(&0) as u32) << 8
+            | *c.get(2).unwrap_or(&0) as u32;
         for k in 0..4 {
             if k <= c.len() {
                 s.push(T[(n >> (18 - 6 * k) & 63) as usize] as char);
@@ -111,10 +123,12 @@ struct PlotOut {
     points: usize,
 }
 
+/// A figure table: `head` column titles after the first (label) column.
 #[derive(Serialize)]
 struct MeasOut {
     name: String,
-    quantities: Vec<String>,
+    corner: String,
+    head: Vec<String>,
     rows: Vec<MRow>,
     plots: Vec<PlotOut>,
 }
@@ -131,13 +145,17 @@ fn read_manifest(dir: &Path) -> Result<Option<serde_json::Value>> {
         return Ok(None);
     }
     let t = std::fs::read_to_string(&p).map_err(|e| Error::io(&p, e))?;
-    serde_json::from_str(&t).map(Some).map_err(|e| Error::io(&p, format!("line {} column {}: {e}", e.line(), e.column())))
+    serde_json::from_str(&t)
+        .map(Some)
+        .map_err(|e| Error::io(&p, format!("line {} column {}: {e}", e.line(), e.column())))
 }
 
 fn scalar(v: &serde_json::Value) -> Option<String> {
     match v {
         serde_json::Value::String(s) => Some(s.clone()),
-        serde_json::Value::Number(n) => Some(n.as_f64().map(fmt_num).unwrap_or_else(|| n.to_string())),
+        serde_json::Value::Number(n) => {
+            Some(n.as_f64().map(fmt_num).unwrap_or_else(|| n.to_string()))
+        }
         serde_json::Value::Bool(b) => Some(b.to_string()),
         _ => None,
     }
@@ -167,14 +185,19 @@ fn plot_for(id: String, spec: PlotSpec, series: Vec<Series>) -> Option<PlotOut> 
     if points == 0 {
         return None;
     }
-    plot_svg(&spec, &series).ok().map(|svg| PlotOut { id, svg, points })
+    plot_svg(&spec, &series)
+        .ok()
+        .map(|svg| PlotOut { id, svg, points })
 }
 
 fn png_size(bytes: &[u8]) -> Option<(u32, u32)> {
     if bytes.len() < 24 || !bytes.starts_with(b"\x89PNG") {
         return None;
     }
-    Some((u32::from_be_bytes(bytes[16..20].try_into().ok()?), u32::from_be_bytes(bytes[20..24].try_into().ok()?)))
+    Some((
+        u32::from_be_bytes(bytes[16..20].try_into().ok()?),
+        u32::from_be_bytes(bytes[20..24].try_into().ok()?),
+    ))
 }
 
 /// Preview images with ROI overlays, as inline SVG.
@@ -182,8 +205,13 @@ fn images(dir: &Path, variants: &[String]) -> Result<Vec<ImageOut>> {
     let mut out = vec![];
     for v in variants {
         let d = dir.join("previews").join(v);
-        let Ok(rd) = std::fs::read_dir(&d) else { continue };
-        let mut files: Vec<PathBuf> = rd.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.extension().is_some_and(|x| x == "png")).collect();
+        let Ok(rd) = std::fs::read_dir(&d) else {
+            continue;
+        };
+        let mut files: Vec<PathBuf> = rd
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|x| x == "png"))
+            .collect();
         files.sort();
         for f in files {
             let bytes = std::fs::read(&f).map_err(|e| Error::io(&f, e))?;
@@ -196,7 +224,8 @@ fn images(dir: &Path, variants: &[String]) -> Result<Vec<ImageOut>> {
             let rois = f.with_extension("rois.json");
             if rois.exists() {
                 let t = std::fs::read_to_string(&rois).map_err(|e| Error::io(&rois, e))?;
-                let list: Vec<serde_json::Value> = serde_json::from_str(&t).map_err(|e| Error::io(&rois, e))?;
+                let list: Vec<serde_json::Value> =
+                    serde_json::from_str(&t).map_err(|e| Error::io(&rois, e))?;
                 for r in list {
                     let g = |k: &str| r.get(k).and_then(|x| x.as_f64()).unwrap_or(0.0);
                     let label = r.get("label").and_then(|x| x.as_str()).unwrap_or("");
@@ -212,19 +241,34 @@ fn images(dir: &Path, variants: &[String]) -> Result<Vec<ImageOut>> {
                 }
             }
             svg.push_str("</svg>");
-            let name = f.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
-            out.push(ImageOut { svg, caption: format!("{v}: {name}") });
+            let name = f
+                .file_stem()
+                .map(|s| s.to_string_lossy().to_string())
+                .unwrap_or_default();
+            out.push(ImageOut {
+                svg,
+                caption: format!("{v}: {name}"),
+            });
         }
     }
     Ok(out)
 }
 
 fn html_escape(s: &str) -> String {
-    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
 }
 
 fn curve_spec(measurement: &str, name: &str, c: &crate::measure::Curve) -> PlotSpec {
-    let lbl = |n: &str, u: &str| if u.is_empty() || u == "1" { n.to_string() } else { format!("{n} ({u})") };
+    let lbl = |n: &str, u: &str| {
+        if u.is_empty() || u == "1" {
+            n.to_string()
+        } else {
+            format!("{n} ({u})")
+        }
+    };
     PlotSpec {
         title: format!("{measurement}: {name}"),
         x_label: lbl(&c.x_name, &c.x_unit),
@@ -243,9 +287,16 @@ pub fn write_report(dir: &Path) -> Result<()> {
     let experiment = rows
         .first()
         .map(|r| r.experiment.clone())
-        .unwrap_or_else(|| dir.file_name().map(|s| s.to_string_lossy().to_string()).unwrap_or_default());
+        .unwrap_or_else(|| {
+            dir.file_name()
+                .map(|s| s.to_string_lossy().to_string())
+                .unwrap_or_default()
+        });
     let variants = variant_order(&rows);
-    let param_names: Vec<String> = rows.first().map(|r| r.params.iter().map(|p| p.0.clone()).collect()).unwrap_or_default();
+    let param_names: Vec<String> = rows
+        .first()
+        .map(|r| r.params.iter().map(|p| p.0.clone()).collect())
+        .unwrap_or_default();
     let vrows: Vec<VariantRow> = variants
         .iter()
         .map(|v| {
@@ -260,7 +311,10 @@ pub fn write_report(dir: &Path) -> Result<()> {
         .collect();
     // A numeric swept parameter to plot figures against.
     let sweep_param: Option<(usize, String)> = param_names.iter().enumerate().find_map(|(i, n)| {
-        let vals: Vec<f64> = vrows.iter().filter_map(|v| v.params.get(i).and_then(|s| s.parse::<f64>().ok())).collect();
+        let vals: Vec<f64> = vrows
+            .iter()
+            .filter_map(|v| v.params.get(i).and_then(|s| s.parse::<f64>().ok()))
+            .collect();
         let distinct = vals.iter().fold(Vec::<f64>::new(), |mut a, x| {
             if !a.contains(x) {
                 a.push(*x)
@@ -285,20 +339,55 @@ pub fn write_report(dir: &Path) -> Result<()> {
                 quants.push((r.quantity.clone(), r.unit.clone()));
             }
         }
-        let table_rows = variants
+        let mvars: Vec<&String> = variants
             .iter()
             .filter(|v| mr.iter().any(|r| &r.variant == *v))
-            .map(|v| MRow {
-                variant: v.clone(),
-                cells: quants
+            .collect();
+        let cell =
+            |v: &String, q: &str| match mr.iter().find(|r| &r.variant == v && r.quantity == q) {
+                Some(r) => Cell {
+                    value: fmt_num(r.value),
+                    stderr: fmt_se(r.stderr),
+                },
+                None => Cell {
+                    value: "—".into(),
+                    stderr: String::new(),
+                },
+            };
+        let qtitle = |q: &(String, String)| {
+            if q.1.is_empty() {
+                q.0.clone()
+            } else {
+                format!("{} ({})", q.0, q.1)
+            }
+        };
+        // Few quantities: a row per variant; many (e.g. 72 MCC means): a row per quantity.
+        let wide = quants.len() <= 10;
+        let (corner, head, table_rows): (String, Vec<String>, Vec<MRow>) = if wide {
+            (
+                "variant".into(),
+                quants.iter().map(qtitle).collect(),
+                mvars
                     .iter()
-                    .map(|q| match mr.iter().find(|r| &r.variant == v && r.quantity == q.0) {
-                        Some(r) => Cell { value: fmt_num(r.value), stderr: fmt_se(r.stderr) },
-                        None => Cell { value: "—".into(), stderr: String::new() },
+                    .map(|v| MRow {
+                        variant: (*v).clone(),
+                        cells: quants.iter().map(|q| cell(v, &q.0)).collect(),
                     })
                     .collect(),
-            })
-            .collect();
+            )
+        } else {
+            (
+                "quantity".into(),
+                mvars.iter().map(|v| v.to_string()).collect(),
+                quants
+                    .iter()
+                    .map(|q| MRow {
+                        variant: qtitle(q),
+                        cells: mvars.iter().map(|v| cell(v, &q.0)).collect(),
+                    })
+                    .collect(),
+            )
+        };
         let mut plots = vec![];
         // Curves: one chart per curve name, a series per variant.
         let mut by_name: BTreeMap<String, (PlotSpec, Vec<Series>)> = BTreeMap::new();
@@ -313,7 +402,11 @@ pub fn write_report(dir: &Path) -> Result<()> {
                     order.push(c.name.clone());
                     (curve_spec(m, &c.name, &c), vec![])
                 });
-                e.1.push(Series { name: v.clone(), points: c.x.iter().copied().zip(c.y.iter().copied()).collect(), stderr: c.stderr.clone() });
+                e.1.push(Series {
+                    name: v.clone(),
+                    points: c.x.iter().copied().zip(c.y.iter().copied()).collect(),
+                    stderr: c.stderr.clone(),
+                });
             }
         }
         for n in &order {
@@ -322,13 +415,18 @@ pub fn write_report(dir: &Path) -> Result<()> {
                 plots.extend(plot_for(format!("plot{pid}"), spec, series));
             }
         }
-        // Figures against the swept parameter.
-        if let Some((pi, pname)) = &sweep_param {
+        // Figures against the swept parameter (for measurements with few figures).
+        if let Some((pi, pname)) = sweep_param.as_ref().filter(|_| quants.len() <= 10) {
             for (q, unit) in &quants {
                 let mut pts: Vec<(f64, f64, f64)> = mr
                     .iter()
                     .filter(|r| &r.quantity == q)
-                    .filter_map(|r| r.params.get(*pi).and_then(|p| p.1.parse::<f64>().ok()).map(|x| (x, r.value, r.stderr)))
+                    .filter_map(|r| {
+                        r.params
+                            .get(*pi)
+                            .and_then(|p| p.1.parse::<f64>().ok())
+                            .map(|x| (x, r.value, r.stderr))
+                    })
                     .collect();
                 pts.sort_by(|a, b| a.0.total_cmp(&b.0));
                 if pts.len() < 2 {
@@ -337,23 +435,46 @@ pub fn write_report(dir: &Path) -> Result<()> {
                 let spec = PlotSpec {
                     title: format!("{m}: {q} vs {pname}"),
                     x_label: pname.clone(),
-                    y_label: if unit.is_empty() || unit == "1" { q.clone() } else { format!("{q} ({unit})") },
+                    y_label: if unit.is_empty() || unit == "1" {
+                        q.clone()
+                    } else {
+                        format!("{q} ({unit})")
+                    },
                     scatter: false,
                     ..Default::default()
                 };
-                let s = Series { name: q.clone(), points: pts.iter().map(|p| (p.0, p.1)).collect(), stderr: pts.iter().map(|p| p.2).collect() };
+                let s = Series {
+                    name: q.clone(),
+                    points: pts.iter().map(|p| (p.0, p.1)).collect(),
+                    stderr: pts.iter().map(|p| p.2).collect(),
+                };
                 pid += 1;
                 plots.extend(plot_for(format!("plot{pid}"), spec, vec![s]));
             }
         }
-        mouts.push(MeasOut { name: m.clone(), quantities: quants.iter().map(|q| if q.1.is_empty() { q.0.clone() } else { format!("{} ({})", q.0, q.1) }).collect(), rows: table_rows, plots });
+        mouts.push(MeasOut {
+            name: m.clone(),
+            corner,
+            head,
+            rows: table_rows,
+            plots,
+        });
     }
     let manifest_kv: Vec<(String, String)> = manifest
         .as_ref()
         .and_then(|m| m.as_object())
-        .map(|o| o.iter().filter_map(|(k, v)| scalar(v).map(|s| (k.clone(), s))).collect())
+        .map(|o| {
+            o.iter()
+                .filter_map(|(k, v)| scalar(v).map(|s| (k.clone(), s)))
+                .collect()
+        })
         .unwrap_or_default();
-    let status = manifest.as_ref().and_then(|m| m.get("status")).and_then(|s| s.as_str()).unwrap_or("ok").to_string();
+    let status = manifest
+        .as_ref()
+        .and_then(|m| m.get("status"))
+        .and_then(|s| s.as_str())
+        .unwrap_or("ok")
+        .to_string();
     let total_s = manifest
         .as_ref()
         .and_then(|m| m.get("total_s"))
@@ -394,7 +515,10 @@ struct IndexRow {
 /// Render `root/index.html` listing every experiment directory under `root`.
 pub fn write_index(root: &Path) -> Result<()> {
     let rd = std::fs::read_dir(root).map_err(|e| Error::io(root, e))?;
-    let mut dirs: Vec<PathBuf> = rd.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.is_dir()).collect();
+    let mut dirs: Vec<PathBuf> = rd
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_dir())
+        .collect();
     dirs.sort();
     let mut exps = vec![];
     for d in dirs {
@@ -402,7 +526,10 @@ pub fn write_index(root: &Path) -> Result<()> {
         if !has_results && !d.join("manifest.json").exists() {
             continue;
         }
-        let name = d.file_name().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
+        let name = d
+            .file_name()
+            .map(|s| s.to_string_lossy().to_string())
+            .unwrap_or_default();
         let manifest = read_manifest(&d).unwrap_or(None);
         let (rows, err) = if has_results {
             match read_results(&d.join("results.csv")) {
@@ -412,7 +539,13 @@ pub fn write_index(root: &Path) -> Result<()> {
         } else {
             (vec![], None)
         };
-        let status = match (&err, manifest.as_ref().and_then(|m| m.get("status")).and_then(|s| s.as_str())) {
+        let status = match (
+            &err,
+            manifest
+                .as_ref()
+                .and_then(|m| m.get("status"))
+                .and_then(|s| s.as_str()),
+        ) {
             (Some(_), _) => "unreadable results".to_string(),
             (None, Some(s)) => s.to_string(),
             (None, None) if has_results => "ok".into(),
@@ -422,7 +555,9 @@ pub fn write_index(root: &Path) -> Result<()> {
             .as_ref()
             .and_then(|m| m.get("total_s"))
             .and_then(|s| s.as_f64())
-            .or_else(|| (!rows.is_empty()).then(|| rows.iter().map(|r| r.total_s).fold(0.0, f64::max)));
+            .or_else(|| {
+                (!rows.is_empty()).then(|| rows.iter().map(|r| r.total_s).fold(0.0, f64::max))
+            });
         let variants = variant_order(&rows);
         let mut headline = vec![];
         let mut seen: Vec<(String, String)> = vec![];
@@ -438,14 +573,21 @@ pub fn write_index(root: &Path) -> Result<()> {
                 r.measurement,
                 r.quantity,
                 fmt_num(r.value),
-                if se.is_empty() { String::new() } else { format!(" ± {se}") },
+                if se.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ± {se}")
+                },
                 r.unit
             ));
         }
         if variants.len() > 1 && !headline.is_empty() {
             headline[0] = format!("{} (variant {})", headline[0], variants[0]);
         }
-        let report = d.join("report.html").exists().then(|| format!("{name}/report.html"));
+        let report = d
+            .join("report.html")
+            .exists()
+            .then(|| format!("{name}/report.html"));
         exps.push(IndexRow {
             name,
             report,
