@@ -48,6 +48,8 @@ enum Command {
     Measure(cli::measure::MeasureCmd),
     /// Compare two results directories or git revisions.
     Diff(cli::report::DiffArgs),
+    /// Write report.html for a results directory (and index.html for a results root).
+    Report(cli::report::ReportArgs),
 }
 
 fn main() {
@@ -71,6 +73,7 @@ fn main() {
         Command::Sensor(c) => cli::sensor::run(c),
         Command::Measure(c) => cli::measure::run(c),
         Command::Diff(a) => cli::report::diff(a),
+        Command::Report(a) => cli::report::report(a),
     };
     match result {
         Ok(code) => std::process::exit(code),

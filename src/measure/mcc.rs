@@ -1,0 +1,188 @@
+//! Macbeth ColorChecker patch means per channel, with patch regions taken
+//! from the renderer's object labels `<chart>/patch01` … `<chart>/patch24`
+//! (no hand-typed pixel boxes).
+//!
+//! Each patch's label region is eroded — a pixel is kept only when every pixel
+//! within `r` px (a (2r+1)² square) carries the same label — with
+//! `r = max(1, round(erode_fraction · min(bbox width, bbox height)))`, so
+//! edges, blur and the chart's black gaps stay out. Per channel the mean over
+//! the kept pixels is reported with standard error std/√n (pixel noise and
+//! render noise, assumed independent between pixels).
+
+use super::plane::ChannelView;
+use super::stats::{mean, std_dev};
+use super::{Curve, Measured};
+use crate::figure::Figure;
+use crate::optical_image::Rect;
+use crate::{Error, Result};
+
+#[derive(Clone, Debug)]
+pub struct Patch {
+    /// 1-based patch number.
+    pub number: usize,
+    pub name: String,
+    /// Bounding box of the eroded region.
+    pub rect: Rect,
+    pub pixels: usize,
+    /// (channel, mean, stderr) per channel.
+    pub means: Vec<(String, f64, f64)>,
+}
+
+/// Patch labels of `chart`: (patch number, label id), sorted by number.
+pub fn patch_labels(label_names: &[String], chart: &str) -> Result<Vec<(usize, u32)>> {
+    let prefix = format!("{chart}/patch");
+    let mut v: Vec<(usize, u32)> = label_names
+        .iter()
+        .enumerate()
+        .filter_map(|(i, n)| {
+            n.strip_prefix(&prefix)
+                .and_then(|s| s.parse::<usize>().ok())
+                .map(|k| (k, i as u32))
+        })
+        .collect();
+    if v.is_empty() {
+        let charts: Vec<&str> = label_names
+            .iter()
+            .filter_map(|n| n.split_once("/patch").map(|p| p.0))
+            .collect();
+        let hint = crate::diag::did_you_mean(chart, charts.iter().copied())
+            .map(|c| format!("; did you mean '{c}'?"))
+            .unwrap_or_default();
+        return Err(Error::invalid(format!(
+            "no objects labelled '{chart}/patchNN' in the image{hint}"
+        )));
+    }
+    v.sort();
+    Ok(v)
+}
+
+/// Means of every patch of `chart`.
+pub fn patch_means(
+    views: &[ChannelView],
+    labels: &[u32],
+    label_names: &[String],
+    chart: &str,
+    erode_fraction: f64,
+) -> Result<Vec<Patch>> {
+    let plane = views
+        .first()
+        .ok_or_else(|| Error::invalid("mcc: no channels"))?
+        .plane;
+    let (w, h) = (plane.width, plane.height);
+    if labels.len() != w * h {
+        return Err(Error::invalid(
+            "MCC patch means need per-pixel object labels (the image carries none)",
+        ));
+    }
+    let mut out = vec![];
+    for (num, id) in patch_labels(label_names, chart)? {
+        let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
+        for y in 0..h {
+            for x in 0..w {
+                if labels[y * w + x] == id {
+                    (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x), y1.max(y));
+                }
+            }
+        }
+        let name = label_names[id as usize].clone();
+        if x0 == usize::MAX {
+            return Err(Error::invalid(format!(
+                "patch '{name}' is not visible in the image"
+            )));
+        }
+        let r =
+            ((erode_fraction * ((x1 - x0 + 1).min(y1 - y0 + 1)) as f64).round() as usize).max(1);
+        let same = |x: usize, y: usize| labels[y * w + x] == id;
+        // Separable erosion: horizontal runs, then vertical.
+        let (bw, bh) = (x1 - x0 + 1, y1 - y0 + 1);
+        let mut hrun = vec![false; bw * bh];
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                hrun[(y - y0) * bw + x - x0] =
+                    x >= r && x + r < w && (x - r..=x + r).all(|xx| same(xx, y));
+            }
+        }
+        let mut kept = vec![];
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                if y >= y0 + r
+                    && y + r <= y1
+                    && (y - r..=y + r).all(|yy| hrun[(yy - y0) * bw + x - x0])
+                {
+                    kept.push((x, y));
+                }
+            }
+        }
+        if kept.is_empty() {
+            return Err(Error::invalid(format!(
+                "patch '{name}' vanishes after eroding {r} px; is it partly hidden?"
+            )));
+        }
+        let (kx0, ky0) = (
+            kept.iter().map(|p| p.0).min().unwrap_or(0),
+            kept.iter().map(|p| p.1).min().unwrap_or(0),
+        );
+        let (kx1, ky1) = (
+            kept.iter().map(|p| p.0).max().unwrap_or(0),
+            kept.iter().map(|p| p.1).max().unwrap_or(0),
+        );
+        let mut means = vec![];
+        for v in views {
+            let vals: Vec<f64> = kept.iter().filter_map(|&(x, y)| v.value(x, y)).collect();
+            if vals.len() < 2 {
+                return Err(Error::invalid(format!(
+                    "patch '{name}': fewer than 2 '{}' pixels after erosion",
+                    v.name
+                )));
+            }
+            means.push((
+                v.name.to_string(),
+                mean(&vals),
+                std_dev(&vals) / (vals.len() as f64).sqrt(),
+            ));
+        }
+        out.push(Patch {
+            number: num,
+            name,
+            rect: Rect::new(
+                kx0 as u32,
+                ky0 as u32,
+                (kx1 - kx0 + 1) as u32,
+                (ky1 - ky0 + 1) as u32,
+            ),
+            pixels: kept.len(),
+            means,
+        });
+    }
+    Ok(out)
+}
+
+/// Figures `patchNN/<ch>_mean` (DV) and one curve per channel (mean vs patch number).
+pub fn measured(patches: &[Patch], measurement: &str) -> Measured {
+    let mut m = Measured::default();
+    for p in patches {
+        for (c, v, se) in &p.means {
+            m.figures.push(Figure::new(
+                measurement,
+                format!("patch{:02}/{c}_mean", p.number),
+                "DV",
+                *v,
+                *se,
+            ));
+        }
+        m.pixels_read.push(p.rect);
+    }
+    if let Some(first) = patches.first() {
+        for (i, (c, _, _)) in first.means.iter().enumerate() {
+            m.curves.push(Curve::new(
+                &format!("patch_means/{c}"),
+                ("patch", "1"),
+                (c, "DV"),
+                patches.iter().map(|p| p.number as f64).collect(),
+                patches.iter().map(|p| p.means[i].1).collect(),
+                patches.iter().map(|p| p.means[i].2).collect(),
+            ));
+        }
+    }
+    m
+}

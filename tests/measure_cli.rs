@@ -1,0 +1,167 @@
+//! `camsim measure …` on image files.
+
+use camsim::image::CfaPattern;
+use camsim::measure::io::write_dng_cfa;
+use std::process::Command;
+
+fn erfc(x: f64) -> f64 {
+    // Numerical Recipes erfcc, fractional error < 1.2e-7.
+    let z = x.abs();
+    let t = 1.0 / (1.0 + 0.5 * z);
+    let p = -z * z - 1.26551223
+        + t * (1.00002368
+            + t * (0.37409196
+                + t * (0.09678418
+                    + t * (-0.18628806
+                        + t * (0.27886807
+                            + t * (-1.13520398
+                                + t * (1.48851587 + t * (-0.82215223 + t * 0.17087277))))))));
+    let a = t * p.exp();
+    if x >= 0.0 { a } else { 2.0 - a }
+}
+
+/// 5° edge, Gaussian σ, pixels = mean of 16×16 sub-samples, values 0.1…0.9.
+fn edge(w: usize, h: usize, sigma: f64) -> Vec<f64> {
+    let th = 5f64.to_radians();
+    let mut v = vec![];
+    for j in 0..h {
+        for i in 0..w {
+            let mut acc = 0.0;
+            for a in 0..16 {
+                for b in 0..16 {
+                    let x = i as f64 - 0.5 + (b as f64 + 0.5) / 16.0 - w as f64 / 2.0;
+                    let y = j as f64 - 0.5 + (a as f64 + 0.5) / 16.0 - h as f64 / 2.0;
+                    acc += 0.5
+                        * erfc(-(x * th.cos() - y * th.sin()) / sigma / std::f64::consts::SQRT_2);
+                }
+            }
+            v.push(0.1 + 0.8 * acc / 256.0);
+        }
+    }
+    v
+}
+
+fn reference_mtf50(sigma: f64) -> f64 {
+    let th = 5f64.to_radians();
+    let sinc = |x: f64| {
+        if x == 0.0 {
+            1.0
+        } else {
+            (std::f64::consts::PI * x).sin() / (std::f64::consts::PI * x)
+        }
+    };
+    let r = |f: f64| {
+        (-2.0 * std::f64::consts::PI.powi(2) * sigma * sigma * f * f).exp()
+            * sinc(f * th.cos())
+            * sinc(f * th.sin())
+            * sinc(f / 4.0)
+    };
+    let (mut a, mut b) = (0.0, 1.0);
+    for _ in 0..60 {
+        let m = 0.5 * (a + b);
+        if r(m) > 0.5 { a = m } else { b = m }
+    }
+    a
+}
+
+fn camsim(args: &[&str]) -> (i32, String, String) {
+    let o = Command::new(env!("CARGO_BIN_EXE_camsim"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        o.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&o.stdout).into(),
+        String::from_utf8_lossy(&o.stderr).into(),
+    )
+}
+
+fn mtf50_of(out: &str) -> f64 {
+    out.lines()
+        .find_map(|l| l.strip_prefix("# mtf50_cy_per_px="))
+        .unwrap()
+        .parse()
+        .unwrap()
+}
+
+#[test]
+fn measure_sfr_on_png_and_dng() {
+    let dir = tempfile::tempdir().unwrap();
+    let (w, h) = (80, 72);
+    let v = edge(w, h, 0.8);
+    // 16-bit PNG, embedded in a larger frame to exercise --roi.
+    let (fw, fh) = (w + 20, h + 10);
+    let mut frame = vec![0u16; fw * fh];
+    for y in 0..h {
+        for x in 0..w {
+            frame[(y + 4) * fw + x + 12] = (v[y * w + x] * 65535.0).round() as u16;
+        }
+    }
+    let png_path = dir.path().join("edge.png");
+    let f = std::fs::File::create(&png_path).unwrap();
+    let mut e = png::Encoder::new(std::io::BufWriter::new(f), fw as u32, fh as u32);
+    e.set_color(png::ColorType::Grayscale);
+    e.set_depth(png::BitDepth::Sixteen);
+    let mut wr = e.write_header().unwrap();
+    wr.write_image_data(
+        &frame
+            .iter()
+            .flat_map(|x| x.to_be_bytes())
+            .collect::<Vec<u8>>(),
+    )
+    .unwrap();
+    wr.finish().unwrap();
+    let (code, out, err) = camsim(&[
+        "measure",
+        "sfr",
+        png_path.to_str().unwrap(),
+        "--roi",
+        "12,4,80,72",
+        "--pixel-um",
+        "1.4",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.starts_with("freq_cy_per_px,freq_cy_per_mm,mtf\n"));
+    let second: Vec<f64> = out
+        .lines()
+        .nth(2)
+        .unwrap()
+        .split(',')
+        .map(|s| s.parse().unwrap())
+        .collect();
+    assert!((second[1] - second[0] / 1.4e-3).abs() < 1e-3, "{second:?}");
+    let t50 = reference_mtf50(0.8);
+    let m50 = mtf50_of(&out);
+    // Same 1 % acceptance as the library test (16×16 sub-samples, 16-bit quantisation: negligible).
+    assert!((m50 - t50).abs() / t50 < 0.01, "png: {m50} vs {t50}");
+
+    // DNG Bayer mosaic, green channel, black level 64.
+    let cfa = CfaPattern::bayer("rggb").unwrap();
+    let dv: Vec<u16> = v
+        .iter()
+        .map(|x| (64.0 + x * 1000.0).round() as u16)
+        .collect();
+    let dng = dir.path().join("edge.dng");
+    write_dng_cfa(&dng, w as u32, h as u32, &dv, &cfa, 64.0, 1023.0).unwrap();
+    let (code, out, err) = camsim(&["measure", "sfr", dng.to_str().unwrap(), "--channel", "g"]);
+    assert_eq!(code, 0, "{err}");
+    let m50 = mtf50_of(&out);
+    // 10-bit quantisation (step 1/800 of the edge contrast) adds ~0.1 % noise to MTF50.
+    assert!((m50 - t50).abs() / t50 < 0.015, "dng: {m50} vs {t50}");
+
+    // Errors name the file and exit 3.
+    let bad = dir.path().join("bad.exr");
+    std::fs::write(&bad, b"nonsense").unwrap();
+    let (code, _, err) = camsim(&["measure", "sfr", bad.to_str().unwrap()]);
+    assert_eq!(code, 3);
+    assert!(err.contains("bad.exr"), "{err}");
+    let (code, _, err) = camsim(&[
+        "measure",
+        "sfr",
+        png_path.to_str().unwrap(),
+        "--roi",
+        "90,4,80,72",
+    ]);
+    assert_eq!(code, 3);
+    assert!(err.contains("outside"), "{err}");
+}
