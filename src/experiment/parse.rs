@@ -100,7 +100,11 @@ pub fn parse_source(path: &Path, text: String, loader: Loader) -> Result<Parsed,
 
 /// Run the registered section validators (see [`hooks`]) on a resolved spec.
 pub fn validate_hooks(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError)> {
-    let to_err = |e: hooks::ParamError, spans: &BTreeMap<String, Span>, whole: Span| {
+    let to_err = |e: hooks::ParamError,
+                  names: &BTreeMap<String, Span>,
+                  values: &BTreeMap<String, Span>,
+                  whole: Span| {
+        let spans = if e.on_value { values } else { names };
         let span = e
             .name
             .as_ref()
@@ -119,12 +123,12 @@ pub fn validate_hooks(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError
     for (key, sec) in [("sensor", &spec.sensor), ("lens", &spec.lens)] {
         if let (Some(s), Some(v)) = (sec, hooks::validator(key)) {
             v(s.file.as_ref().map(|f| f.path.as_path()), &s.overrides)
-                .map_err(|e| to_err(e, &s.param_spans, s.span))?;
+                .map_err(|e| to_err(e, &s.param_spans, &s.value_spans, s.span))?;
         }
     }
     for m in &spec.measures {
         if let Some(v) = hooks::validator(&format!("measure:{}", m.kind)) {
-            v(None, &m.params).map_err(|e| to_err(e, &m.param_spans, m.span))?;
+            v(None, &m.params).map_err(|e| to_err(e, &m.param_spans, &m.value_spans, m.span))?;
         }
     }
     for a in &spec.additions {
@@ -135,12 +139,12 @@ pub fn validate_hooks(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError
         };
         if let Some(v) = hooks::validator(key) {
             v(a.file.as_ref().map(|f| f.path.as_path()), &a.params)
-                .map_err(|e| to_err(e, &a.param_spans, a.span))?;
+                .map_err(|e| to_err(e, &a.param_spans, &a.value_spans, a.span))?;
         }
     }
     if let Some(v) = hooks::validator("override") {
         for o in &spec.overrides {
-            v(None, &o.params).map_err(|e| to_err(e, &o.param_spans, o.span))?;
+            v(None, &o.params).map_err(|e| to_err(e, &o.param_spans, &o.value_spans, o.span))?;
         }
     }
     Ok(())
@@ -623,6 +627,7 @@ impl P {
                     let mut object = None;
                     let mut params = Params::new();
                     let mut spans = BTreeMap::new();
+                    let mut vspans = BTreeMap::new();
                     for e in ents {
                         match e.name {
                             None => {
@@ -643,6 +648,7 @@ impl P {
                             Some((k, ks)) => {
                                 apply::check_generic(&k, &e.value).map_err(|x| self.ae(ks, x))?;
                                 params.set(k.clone(), e.value);
+                                vspans.insert(k.clone(), e.vspan);
                                 spans.insert(k, ks);
                             }
                         }
@@ -665,6 +671,7 @@ impl P {
                         }
                         o.params.0.extend(params.0);
                         o.param_spans.extend(spans);
+                        o.value_spans.extend(vspans);
                         o.span = sp;
                     } else {
                         spec.overrides.push(Override {
@@ -672,6 +679,7 @@ impl P {
                             params,
                             span: sp,
                             param_spans: spans,
+                            value_spans: vspans,
                         });
                     }
                 }
@@ -875,6 +883,7 @@ impl P {
             params: Params::new(),
             span: sp,
             param_spans: BTreeMap::new(),
+            value_spans: BTreeMap::new(),
         };
         let mut target = None;
         for e in ents {
@@ -943,6 +952,7 @@ impl P {
                             apply::check_generic(k, &e.value).map_err(|x| self.ae(*ks, x))?;
                             a.params.set(k.clone(), e.value.clone());
                             a.param_spans.insert(k.clone(), *ks);
+                            a.value_spans.insert(k.clone(), e.vspan);
                             Ok(())
                         }
                     };
@@ -1015,7 +1025,7 @@ impl P {
                 }
                 Some((k, ks)) => {
                     apply::check_generic(&k, &e.value).map_err(|x| self.ae(ks, x))?;
-                    params.push((k, ks, e.value));
+                    params.push((k, ks, e.vspan, e.value));
                 }
             }
         }
@@ -1024,9 +1034,11 @@ impl P {
             s.file = Some(f);
             s.overrides = Params::new();
             s.param_spans.clear();
+            s.value_spans.clear();
         }
-        for (k, ks, v) in params {
+        for (k, ks, vs, v) in params {
             s.overrides.set(k.clone(), v);
+            s.value_spans.insert(k.clone(), vs);
             s.param_spans.insert(k, ks);
         }
         if s.file.is_none() && s.overrides.0.is_empty() {
@@ -1048,6 +1060,7 @@ impl P {
             params: Params::new(),
             span: sp,
             param_spans: BTreeMap::new(),
+            value_spans: BTreeMap::new(),
         };
         let mut name = None;
         for e in ents {
@@ -1097,6 +1110,7 @@ impl P {
                         apply::check_generic(k, &e.value).map_err(|x| self.ae(*ks, x))?;
                         m.params.set(k.clone(), e.value.clone());
                         m.param_spans.insert(k.clone(), *ks);
+                        m.value_spans.insert(k.clone(), e.vspan);
                     }
                 },
             }

@@ -318,7 +318,10 @@ mod tests {
     fn tuples_are_found_only_in_value_position_outside_strings_and_comments() {
         assert_eq!(tuples("a p=(0 1 -2.5e3)"), vec![4]);
         assert_eq!(tuples("a (1 2) (3 4)\n"), vec![2, 8]);
-        assert_eq!(tuples("a \"(1 2)\" // (3 4)\n/* (5 6) */"), Vec::<usize>::new());
+        assert_eq!(
+            tuples("a \"(1 2)\" // (3 4)\n/* (5 6) */"),
+            Vec::<usize>::new()
+        );
         assert_eq!(tuples("a #\"(1 2)\"# (3)"), vec![12]);
         assert_eq!(tuples("a \"\"\"\n(1 2)\n\"\"\" (7)"), vec![16]);
         // type annotations and words are left to KDL
