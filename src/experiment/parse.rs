@@ -496,7 +496,12 @@ impl P {
             measures: Vec::new(),
             tags: BTreeMap::new(),
         };
-        let mut own_adds: Vec<String> = Vec::new();
+        // Indexes for duplicate checks (linear scans would be quadratic in big files).
+        let mut own_adds: std::collections::HashSet<String> = Default::default();
+        let mut add_spans: std::collections::HashMap<String, Span> = Default::default();
+        let mut removed: std::collections::HashSet<String> = Default::default();
+        let mut override_at: std::collections::HashMap<String, usize> = Default::default();
+        let mut measure_spans: std::collections::HashMap<String, Span> = Default::default();
         if let Some(b) = children.nodes().iter().find(|n| n.name().value() == "base") {
             self.no_children(file, b)?;
             let (written, vspan) = self.single_string(file, b, "base file")?;
@@ -542,6 +547,13 @@ impl P {
             spec.sensor = bspec.sensor;
             spec.render = bspec.render;
         }
+        for a in &spec.additions {
+            add_spans.insert(a.id.clone(), a.span);
+        }
+        removed.extend(spec.removals.iter().cloned());
+        for (i, o) in spec.overrides.iter().enumerate() {
+            override_at.insert(o.object.clone(), i);
+        }
         let mut camera_given = false;
         let mut sweep_node = None;
         for n in children.nodes() {
@@ -573,12 +585,13 @@ impl P {
                 "add" => {
                     self.no_children(file, n)?;
                     let a = self.parse_add(file, n, &dir)?;
-                    if let Some(prev) = spec.additions.iter().find(|x| x.id == a.id) {
+                    if let Some(prev) = add_spans.get(&a.id) {
                         return Err(self
                             .e(a.span, format!("duplicate object id '{}'", a.id))
-                            .with_help(format!("first added at {}", self.where_(prev.span))));
+                            .with_help(format!("first added at {}", self.where_(*prev))));
                     }
-                    own_adds.push(a.id.clone());
+                    own_adds.insert(a.id.clone());
+                    add_spans.insert(a.id.clone(), a.span);
                     spec.additions.push(a);
                 }
                 "remove" => {
@@ -612,11 +625,12 @@ impl P {
                                 ),
                             ));
                         }
-                        if let Some(i) = spec.additions.iter().position(|a| a.id == id) {
-                            spec.additions.remove(i);
-                        } else if spec.removals.contains(&id) {
+                        if add_spans.remove(&id).is_some() {
+                            spec.additions.retain(|a| a.id != id);
+                        } else if removed.contains(&id) {
                             return Err(self.e(e.vspan, format!("'{id}' is removed twice")));
                         } else {
+                            removed.insert(id.clone());
                             spec.removals.push(id);
                         }
                     }
@@ -663,7 +677,7 @@ impl P {
                             .e(sp, format!("'override \"{object}\"' changes nothing"))
                             .with_help("add properties, e.g. reflectance=\"cbox-red-wall\""));
                     }
-                    if let Some(o) = spec.overrides.iter_mut().find(|o| o.object == object) {
+                    if let Some(o) = override_at.get(&object).map(|&i| &mut spec.overrides[i]) {
                         if o.span.file == file {
                             return Err(self
                                 .e(sp, format!("duplicate override of '{object}'"))
@@ -674,6 +688,7 @@ impl P {
                         o.value_spans.extend(vspans);
                         o.span = sp;
                     } else {
+                        override_at.insert(object.clone(), spec.overrides.len());
                         spec.overrides.push(Override {
                             object,
                             params,
@@ -773,14 +788,15 @@ impl P {
                 "measure" => {
                     self.no_children(file, n)?;
                     let m = self.parse_measure(file, n)?;
-                    if let Some(prev) = spec.measures.iter().find(|x| x.name == m.name) {
+                    if let Some(prev) = measure_spans.get(&m.name) {
                         return Err(self
                             .e(m.span, format!("duplicate measurement name '{}'", m.name))
                             .with_help(format!(
                                 "first at {}; give one of them name=\"…\"",
-                                self.where_(prev.span)
+                                self.where_(*prev)
                             )));
                     }
+                    measure_spans.insert(m.name.clone(), m.span);
                     spec.measures.push(m);
                 }
                 "sweep" => sweep_node = Some(n),
