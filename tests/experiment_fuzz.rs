@@ -316,3 +316,77 @@ fn no_panic_or_hang_on_100k_random_and_mutated_inputs() {
     );
     assert!(ok > 100, "mutations should keep some inputs valid ({ok})");
 }
+
+/// Inputs built to exhaust the stack or time: each fails (or passes) cleanly and quickly.
+#[test]
+fn pathological_inputs_fail_cleanly() {
+    let path = Path::new("tests/experiments/pathological.kdl");
+    let exp = |body: &str| {
+        format!("experiment \"p\" {{\n    measure \"colorimetry\" spectrum=\"cie-a\"\n{body}\n}}\n")
+    };
+    let cases: Vec<(String, Option<(usize, usize)>)> = vec![
+        ("a {".repeat(50_000), Some((1, 195))),
+        ("/*".repeat(50_000), Some((1, 129))),
+        (
+            exp(&format!(
+                "    render wavelength-nm=({})",
+                "1 ".repeat(100_000)
+            )),
+            Some((3, 26)),
+        ),
+        (
+            exp(&format!("    description \"{}\"", "x".repeat(200_000))),
+            None,
+        ),
+        (
+            exp(&(0..5000)
+                .map(|i| format!("    add \"o{i}\" target=\"mcc\"\n"))
+                .collect::<String>()),
+            None,
+        ),
+        (
+            exp("    sweep {\n        tag.a start=0 stop=1e12 step=1\n    }"),
+            Some((4, 9)),
+        ),
+        (
+            exp(&format!(
+                "    sweep {{\n{}    }}",
+                (0..40)
+                    .map(|i| format!("        tag.t{i} 1 2\n"))
+                    .collect::<String>()
+            )),
+            Some((3, 5)),
+        ),
+        ("\u{feff}\u{0}\u{7f}".repeat(1000), Some((1, 2))),
+    ];
+    for (i, (text, want)) in cases.into_iter().enumerate() {
+        let t = Instant::now();
+        let r = experiment::parse_source(path, text, Loader::Disk)
+            .and_then(|p| experiment::plan(&p, None).map(|_| ()));
+        assert!(
+            t.elapsed() < Duration::from_secs(5),
+            "case {i} took {:?}",
+            t.elapsed()
+        );
+        match (r, want) {
+            (Ok(()), None) => {}
+            (Err(e), Some((line, col))) => {
+                assert_eq!(
+                    (e.line, e.col),
+                    (line, col),
+                    "case {i}: {}",
+                    e.message.chars().take(200).collect::<String>()
+                )
+            }
+            (r, w) => panic!(
+                "case {i}: got {:?}, wanted {:?}",
+                r.err().map(|e| (
+                    e.line,
+                    e.col,
+                    e.message.chars().take(200).collect::<String>()
+                )),
+                w
+            ),
+        }
+    }
+}

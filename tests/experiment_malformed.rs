@@ -247,7 +247,7 @@ const CASES: &[(&str, &str, &str)] = &[
     ),
     (
         "unknown-spectrum.kdl",
-        "unknown-spectrum.kdl:2:27",
+        "unknown-spectrum.kdl:2:36",
         "unknown spectrum 'cie-d66'",
     ),
     (

@@ -385,6 +385,7 @@ pub fn apply(
                         params: Default::default(),
                         span: Default::default(),
                         param_spans: Default::default(),
+                        value_spans: Default::default(),
                     };
                     o.params.set(*key, v.clone());
                     spec.overrides.push(o);

@@ -20,6 +20,8 @@ pub struct ParamError {
     pub name: Option<String>,
     pub message: String,
     pub help: Option<String>,
+    /// Point at the property's value rather than its name.
+    pub on_value: bool,
 }
 
 impl ParamError {
@@ -28,10 +30,16 @@ impl ParamError {
             name: name.map(str::to_string),
             message: message.into(),
             help: None,
+            on_value: false,
         }
     }
     pub fn with_help(mut self, h: impl Into<String>) -> Self {
         self.help = Some(h.into());
+        self
+    }
+    /// Report at the property's value (e.g. an unknown spectrum name).
+    pub fn at_value(mut self) -> Self {
+        self.on_value = true;
         self
     }
     /// Unknown name `name` among `known`, with a did-you-mean suggestion.
@@ -103,7 +111,7 @@ pub fn validate_colorimetry(_file: Option<&Path>, p: &Params) -> Result<(), Para
                 return Ok(()); // a CSV column; read (and checked) when the variant runs
             }
             crate::spectrum::library::named(s).map(|_| ()).map_err(|e| {
-                let mut err = ParamError::new(Some("spectrum"), e.clone());
+                let mut err = ParamError::new(Some("spectrum"), e.clone()).at_value();
                 if let Some(i) = e.find("(did you mean") {
                     err.help = Some(e[i + 1..e.len() - 1].to_string());
                     err.message = e[..i].trim().to_string();

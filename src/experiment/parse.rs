@@ -100,7 +100,11 @@ pub fn parse_source(path: &Path, text: String, loader: Loader) -> Result<Parsed,
 
 /// Run the registered section validators (see [`hooks`]) on a resolved spec.
 pub fn validate_hooks(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError)> {
-    let to_err = |e: hooks::ParamError, spans: &BTreeMap<String, Span>, whole: Span| {
+    let to_err = |e: hooks::ParamError,
+                  names: &BTreeMap<String, Span>,
+                  values: &BTreeMap<String, Span>,
+                  whole: Span| {
+        let spans = if e.on_value { values } else { names };
         let span = e
             .name
             .as_ref()
@@ -119,12 +123,12 @@ pub fn validate_hooks(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError
     for (key, sec) in [("sensor", &spec.sensor), ("lens", &spec.lens)] {
         if let (Some(s), Some(v)) = (sec, hooks::validator(key)) {
             v(s.file.as_ref().map(|f| f.path.as_path()), &s.overrides)
-                .map_err(|e| to_err(e, &s.param_spans, s.span))?;
+                .map_err(|e| to_err(e, &s.param_spans, &s.value_spans, s.span))?;
         }
     }
     for m in &spec.measures {
         if let Some(v) = hooks::validator(&format!("measure:{}", m.kind)) {
-            v(None, &m.params).map_err(|e| to_err(e, &m.param_spans, m.span))?;
+            v(None, &m.params).map_err(|e| to_err(e, &m.param_spans, &m.value_spans, m.span))?;
         }
     }
     for a in &spec.additions {
@@ -135,12 +139,12 @@ pub fn validate_hooks(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError
         };
         if let Some(v) = hooks::validator(key) {
             v(a.file.as_ref().map(|f| f.path.as_path()), &a.params)
-                .map_err(|e| to_err(e, &a.param_spans, a.span))?;
+                .map_err(|e| to_err(e, &a.param_spans, &a.value_spans, a.span))?;
         }
     }
     if let Some(v) = hooks::validator("override") {
         for o in &spec.overrides {
-            v(None, &o.params).map_err(|e| to_err(e, &o.param_spans, o.span))?;
+            v(None, &o.params).map_err(|e| to_err(e, &o.param_spans, &o.value_spans, o.span))?;
         }
     }
     Ok(())
@@ -492,7 +496,12 @@ impl P {
             measures: Vec::new(),
             tags: BTreeMap::new(),
         };
-        let mut own_adds: Vec<String> = Vec::new();
+        // Indexes for duplicate checks (linear scans would be quadratic in big files).
+        let mut own_adds: std::collections::HashSet<String> = Default::default();
+        let mut add_spans: std::collections::HashMap<String, Span> = Default::default();
+        let mut removed: std::collections::HashSet<String> = Default::default();
+        let mut override_at: std::collections::HashMap<String, usize> = Default::default();
+        let mut measure_spans: std::collections::HashMap<String, Span> = Default::default();
         if let Some(b) = children.nodes().iter().find(|n| n.name().value() == "base") {
             self.no_children(file, b)?;
             let (written, vspan) = self.single_string(file, b, "base file")?;
@@ -538,6 +547,13 @@ impl P {
             spec.sensor = bspec.sensor;
             spec.render = bspec.render;
         }
+        for a in &spec.additions {
+            add_spans.insert(a.id.clone(), a.span);
+        }
+        removed.extend(spec.removals.iter().cloned());
+        for (i, o) in spec.overrides.iter().enumerate() {
+            override_at.insert(o.object.clone(), i);
+        }
         let mut camera_given = false;
         let mut sweep_node = None;
         for n in children.nodes() {
@@ -569,12 +585,13 @@ impl P {
                 "add" => {
                     self.no_children(file, n)?;
                     let a = self.parse_add(file, n, &dir)?;
-                    if let Some(prev) = spec.additions.iter().find(|x| x.id == a.id) {
+                    if let Some(prev) = add_spans.get(&a.id) {
                         return Err(self
                             .e(a.span, format!("duplicate object id '{}'", a.id))
-                            .with_help(format!("first added at {}", self.where_(prev.span))));
+                            .with_help(format!("first added at {}", self.where_(*prev))));
                     }
-                    own_adds.push(a.id.clone());
+                    own_adds.insert(a.id.clone());
+                    add_spans.insert(a.id.clone(), a.span);
                     spec.additions.push(a);
                 }
                 "remove" => {
@@ -608,11 +625,12 @@ impl P {
                                 ),
                             ));
                         }
-                        if let Some(i) = spec.additions.iter().position(|a| a.id == id) {
-                            spec.additions.remove(i);
-                        } else if spec.removals.contains(&id) {
+                        if add_spans.remove(&id).is_some() {
+                            spec.additions.retain(|a| a.id != id);
+                        } else if removed.contains(&id) {
                             return Err(self.e(e.vspan, format!("'{id}' is removed twice")));
                         } else {
+                            removed.insert(id.clone());
                             spec.removals.push(id);
                         }
                     }
@@ -623,6 +641,7 @@ impl P {
                     let mut object = None;
                     let mut params = Params::new();
                     let mut spans = BTreeMap::new();
+                    let mut vspans = BTreeMap::new();
                     for e in ents {
                         match e.name {
                             None => {
@@ -643,6 +662,7 @@ impl P {
                             Some((k, ks)) => {
                                 apply::check_generic(&k, &e.value).map_err(|x| self.ae(ks, x))?;
                                 params.set(k.clone(), e.value);
+                                vspans.insert(k.clone(), e.vspan);
                                 spans.insert(k, ks);
                             }
                         }
@@ -657,7 +677,7 @@ impl P {
                             .e(sp, format!("'override \"{object}\"' changes nothing"))
                             .with_help("add properties, e.g. reflectance=\"cbox-red-wall\""));
                     }
-                    if let Some(o) = spec.overrides.iter_mut().find(|o| o.object == object) {
+                    if let Some(o) = override_at.get(&object).map(|&i| &mut spec.overrides[i]) {
                         if o.span.file == file {
                             return Err(self
                                 .e(sp, format!("duplicate override of '{object}'"))
@@ -665,13 +685,16 @@ impl P {
                         }
                         o.params.0.extend(params.0);
                         o.param_spans.extend(spans);
+                        o.value_spans.extend(vspans);
                         o.span = sp;
                     } else {
+                        override_at.insert(object.clone(), spec.overrides.len());
                         spec.overrides.push(Override {
                             object,
                             params,
                             span: sp,
                             param_spans: spans,
+                            value_spans: vspans,
                         });
                     }
                 }
@@ -765,14 +788,15 @@ impl P {
                 "measure" => {
                     self.no_children(file, n)?;
                     let m = self.parse_measure(file, n)?;
-                    if let Some(prev) = spec.measures.iter().find(|x| x.name == m.name) {
+                    if let Some(prev) = measure_spans.get(&m.name) {
                         return Err(self
                             .e(m.span, format!("duplicate measurement name '{}'", m.name))
                             .with_help(format!(
                                 "first at {}; give one of them name=\"…\"",
-                                self.where_(prev.span)
+                                self.where_(*prev)
                             )));
                     }
+                    measure_spans.insert(m.name.clone(), m.span);
                     spec.measures.push(m);
                 }
                 "sweep" => sweep_node = Some(n),
@@ -875,6 +899,7 @@ impl P {
             params: Params::new(),
             span: sp,
             param_spans: BTreeMap::new(),
+            value_spans: BTreeMap::new(),
         };
         let mut target = None;
         for e in ents {
@@ -943,6 +968,7 @@ impl P {
                             apply::check_generic(k, &e.value).map_err(|x| self.ae(*ks, x))?;
                             a.params.set(k.clone(), e.value.clone());
                             a.param_spans.insert(k.clone(), *ks);
+                            a.value_spans.insert(k.clone(), e.vspan);
                             Ok(())
                         }
                     };
@@ -1015,7 +1041,7 @@ impl P {
                 }
                 Some((k, ks)) => {
                     apply::check_generic(&k, &e.value).map_err(|x| self.ae(ks, x))?;
-                    params.push((k, ks, e.value));
+                    params.push((k, ks, e.vspan, e.value));
                 }
             }
         }
@@ -1024,9 +1050,11 @@ impl P {
             s.file = Some(f);
             s.overrides = Params::new();
             s.param_spans.clear();
+            s.value_spans.clear();
         }
-        for (k, ks, v) in params {
+        for (k, ks, vs, v) in params {
             s.overrides.set(k.clone(), v);
+            s.value_spans.insert(k.clone(), vs);
             s.param_spans.insert(k, ks);
         }
         if s.file.is_none() && s.overrides.0.is_empty() {
@@ -1048,6 +1076,7 @@ impl P {
             params: Params::new(),
             span: sp,
             param_spans: BTreeMap::new(),
+            value_spans: BTreeMap::new(),
         };
         let mut name = None;
         for e in ents {
@@ -1097,6 +1126,7 @@ impl P {
                         apply::check_generic(k, &e.value).map_err(|x| self.ae(*ks, x))?;
                         m.params.set(k.clone(), e.value.clone());
                         m.param_spans.insert(k.clone(), *ks);
+                        m.value_spans.insert(k.clone(), e.vspan);
                     }
                 },
             }

@@ -85,6 +85,16 @@ pub fn in_shard(k: usize, shard: Option<(usize, usize)>) -> bool {
 
 static FINISHED_IN_PROCESS: AtomicUsize = AtomicUsize::new(0);
 
+/// End the process as `kill -9` would (tests of interrupted runs): SIGKILL
+/// through the `kill` command where there is one (no core dump), else abort.
+fn kill_self() -> ! {
+    let _ = std::process::Command::new("kill")
+        .args(["-9", &std::process::id().to_string()])
+        .status();
+    std::thread::sleep(std::time::Duration::from_secs(5));
+    std::process::abort()
+}
+
 /// Run the figures of one variant.
 pub fn run_variant(v: &PlannedVariant) -> Result<(Vec<Figure>, f64)> {
     let spec = &v.variant.spec;
@@ -175,7 +185,7 @@ pub fn run_plan(plan: &Plan, opts: &RunOptions, progress: &mut dyn Progress) -> 
                     sum.done += 1;
                     let n = FINISHED_IN_PROCESS.fetch_add(1, Ordering::SeqCst) + 1;
                     if abort_after.is_some_and(|k| n >= k) {
-                        std::process::abort();
+                        kill_self();
                     }
                     if interrupt_after.is_some_and(|k| n >= k) {
                         opts.interrupted.store(true, Ordering::SeqCst);

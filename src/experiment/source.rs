@@ -16,6 +16,13 @@ use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+/// Longest caret drawn under an error (long values are cut).
+const MAX_CARET: usize = 120;
+
+/// Deepest `{ … }` or `/* … */` nesting accepted; deeper input would exhaust the
+/// KDL parser's stack (the language needs 4 levels).
+pub const MAX_NESTING: usize = 64;
+
 /// A location in one of the files of a [`SourceMap`]: byte offset and length.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct Span {
@@ -51,7 +58,13 @@ impl SourceMap {
     /// A located error at `span`.
     pub fn error(&self, span: Span, message: impl Into<String>) -> Located {
         match self.files.get(span.file) {
-            Some(f) => Located::at_offset(&f.path, &f.text, span.offset, span.len, message),
+            Some(f) => Located::at_offset(
+                &f.path,
+                &f.text,
+                span.offset,
+                span.len.min(MAX_CARET),
+                message,
+            ),
             None => Located {
                 file: PathBuf::from("<unknown>"),
                 line: 1,
@@ -222,10 +235,88 @@ pub fn rewrite_tuples(text: &str, tuples: &BTreeSet<usize>) -> String {
     String::from_utf8(bytes).unwrap_or_else(|_| text.to_string())
 }
 
+/// Offset of the first `{` or `/*` nested deeper than [`MAX_NESTING`], if any.
+/// Strings and line comments are skipped as in [`find_tuples`]. Never panics.
+pub fn too_deep(text: &str) -> Option<usize> {
+    let b = text.as_bytes();
+    let (mut depth, mut i) = (0usize, 0usize);
+    while i < b.len() {
+        match b[i] {
+            b'/' if b.get(i + 1) == Some(&b'/') => {
+                while i < b.len() && b[i] != b'\n' {
+                    i += 1;
+                }
+            }
+            b'/' if b.get(i + 1) == Some(&b'*') => {
+                let mut c = 0usize;
+                while i < b.len() {
+                    if b[i] == b'/' && b.get(i + 1) == Some(&b'*') {
+                        c += 1;
+                        if c > MAX_NESTING {
+                            return Some(i);
+                        }
+                        i += 2;
+                    } else if b[i] == b'*' && b.get(i + 1) == Some(&b'/') {
+                        c -= 1;
+                        i += 2;
+                        if c == 0 {
+                            break;
+                        }
+                    } else {
+                        i += 1;
+                    }
+                }
+            }
+            b'"' => {
+                let triple = b.get(i + 1) == Some(&b'"') && b.get(i + 2) == Some(&b'"');
+                i += if triple { 3 } else { 1 };
+                while i < b.len() {
+                    if b[i] == b'\\' {
+                        i += 2;
+                        continue;
+                    }
+                    if b[i] == b'"'
+                        && (!triple || (b.get(i + 1) == Some(&b'"') && b.get(i + 2) == Some(&b'"')))
+                    {
+                        i += if triple { 3 } else { 1 };
+                        break;
+                    }
+                    i += 1;
+                }
+            }
+            b'{' => {
+                depth += 1;
+                if depth > MAX_NESTING {
+                    return Some(i);
+                }
+                i += 1;
+            }
+            b'}' => {
+                depth = depth.saturating_sub(1);
+                i += 1;
+            }
+            _ => i += 1,
+        }
+    }
+    None
+}
+
 /// Parse one file of the map as KDL v2. Parser errors become `file:line:col`
 /// diagnostics; a panic inside the KDL crate (defence in depth) becomes an error too.
 pub fn parse_kdl(map: &SourceMap, file: usize) -> Result<kdl::KdlDocument, Located> {
     let f = map.file(file);
+    if let Some(at) = too_deep(&f.text) {
+        return Err(map
+            .error(
+                Span {
+                    file,
+                    offset: at,
+                    len: 2,
+                },
+                format!("nesting deeper than {MAX_NESTING} levels"),
+            )
+            .with_help("experiments nest at most experiment { sweep { zip { … } } }"));
+    }
     let text = rewrite_tuples(&f.text, &f.tuples);
     let res = std::panic::catch_unwind(|| kdl::KdlDocument::parse_v2(&text));
     match res {
@@ -318,7 +409,10 @@ mod tests {
     fn tuples_are_found_only_in_value_position_outside_strings_and_comments() {
         assert_eq!(tuples("a p=(0 1 -2.5e3)"), vec![4]);
         assert_eq!(tuples("a (1 2) (3 4)\n"), vec![2, 8]);
-        assert_eq!(tuples("a \"(1 2)\" // (3 4)\n/* (5 6) */"), Vec::<usize>::new());
+        assert_eq!(
+            tuples("a \"(1 2)\" // (3 4)\n/* (5 6) */"),
+            Vec::<usize>::new()
+        );
         assert_eq!(tuples("a #\"(1 2)\"# (3)"), vec![12]);
         assert_eq!(tuples("a \"\"\"\n(1 2)\n\"\"\" (7)"), vec![16]);
         // type annotations and words are left to KDL
@@ -332,6 +426,16 @@ mod tests {
         let t = rewrite_tuples(s, &find_tuples(s));
         assert_eq!(t, "node p=\"0 1 2\" q=\"x\"");
         assert_eq!(t.len(), s.len());
+    }
+
+    #[test]
+    fn deep_nesting_is_refused_before_kdl_parsing() {
+        assert_eq!(too_deep("a { b { c } }"), None);
+        let deep = "a {".repeat(20_000);
+        assert_eq!(too_deep(&deep), Some(3 * MAX_NESTING + 2));
+        assert!(too_deep(&"/*".repeat(20_000)).is_some());
+        assert_eq!(too_deep(&format!("a \"{}\"", "{".repeat(100))), None);
+        assert_eq!(too_deep(&format!("// {}\n", "{".repeat(100))), None);
     }
 
     #[test]

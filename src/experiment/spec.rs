@@ -62,8 +62,12 @@ pub struct Addition {
     pub params: Params,
     #[serde(skip)]
     pub span: Span,
+    /// Spans of the property names.
     #[serde(skip)]
     pub param_spans: BTreeMap<String, Span>,
+    /// Spans of the property values.
+    #[serde(skip)]
+    pub value_spans: BTreeMap<String, Span>,
 }
 
 /// Changes to an object of the base scene (`override "wall-left" reflectance="cbox-red-wall"`).
@@ -73,8 +77,12 @@ pub struct Override {
     pub params: Params,
     #[serde(skip)]
     pub span: Span,
+    /// Spans of the property names.
     #[serde(skip)]
     pub param_spans: BTreeMap<String, Span>,
+    /// Spans of the property values.
+    #[serde(skip)]
+    pub value_spans: BTreeMap<String, Span>,
 }
 
 /// Camera pose in scene coordinates (metres).
@@ -96,8 +104,12 @@ pub struct ConfigSection {
     pub overrides: Params,
     #[serde(skip)]
     pub span: Span,
+    /// Spans of the property names.
     #[serde(skip)]
     pub param_spans: BTreeMap<String, Span>,
+    /// Spans of the property values.
+    #[serde(skip)]
+    pub value_spans: BTreeMap<String, Span>,
 }
 
 /// Render settings.
@@ -136,8 +148,12 @@ pub struct Measure {
     pub params: Params,
     #[serde(skip)]
     pub span: Span,
+    /// Spans of the property names.
     #[serde(skip)]
     pub param_spans: BTreeMap<String, Span>,
+    /// Spans of the property values.
+    #[serde(skip)]
+    pub value_spans: BTreeMap<String, Span>,
 }
 
 /// Known measurement kinds.
