@@ -102,3 +102,32 @@ pub fn render(
     let names = scene.objects.iter().map(|o| o.name.clone()).collect();
     film::render_world(&world, camera, &to_world, film, settings, names)
 }
+
+/// Render several pixel rectangles of the same film (what measurements read),
+/// building the BVH once. Each result is bit-identical to the same pixels of
+/// a full render with the same settings; `settings.roi` is ignored.
+pub fn render_regions(
+    scene: &Scene,
+    camera: &dyn Camera,
+    film: &FilmSpec,
+    settings: &RenderSettings,
+    regions: &[Rect],
+) -> Result<Vec<OpticalImage>> {
+    let world = World::build(scene, &settings.grid, BvhKind::Bvh2)?;
+    let to_world = scene
+        .camera
+        .as_ref()
+        .map(|c| c.to_world)
+        .unwrap_or(glam::DMat4::IDENTITY);
+    let names: Vec<String> = scene.objects.iter().map(|o| o.name.clone()).collect();
+    regions
+        .iter()
+        .map(|r| {
+            let s = RenderSettings {
+                roi: Some(*r),
+                ..settings.clone()
+            };
+            film::render_world(&world, camera, &to_world, film, &s, names.clone())
+        })
+        .collect()
+}
