@@ -381,6 +381,18 @@ fn roi_pixels_equal_full_render_bit_for_bit() {
     let full = render_box(1.0, 0, None);
     let roi = Rect::new(5, 7, 10, 6);
     let part = render_box(1.0, 0, Some(roi));
+    // The multi-region entry point gives the same pixels.
+    let (scene, film) = small_box_scene(1.0);
+    let cam = Pinhole::new(70.0, 2.0, &film).unwrap();
+    let regions = camsim::render::render_regions(
+        &scene,
+        &cam,
+        &film,
+        &settings(16, 6),
+        &[roi, Rect::new(0, 0, 2, 2)],
+    )
+    .unwrap();
+    assert_eq!(bits(&regions[0].irradiance), bits(&part.irradiance));
     let nb = full.bands();
     for y in 0..roi.h {
         for x in 0..roi.w {

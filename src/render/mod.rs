@@ -14,6 +14,23 @@
 //!   thread count and any region of interest give bit-identical pixels.
 //! - Non-finite samples are dropped (counted in `nan_count`), never written.
 //! - Samples with pdf = 0 terminate the path (zero contribution).
+//! - Labels and depth come from one extra ray through the pixel centre and the
+//!   pupil centre (u = ½, ½) at the middle wavelength of the grid; depth is the
+//!   distance along that ray in metres (∞ when it escapes).
+//! - `FilmSpec::crop_window` is not applied here; use `RenderSettings::roi`.
+//! - Spectra: every path carries all bands of the grid (no colour noise). A
+//!   dispersive camera (`Camera::is_dispersive`) makes each camera sample pick
+//!   one band uniformly (hero wavelength, weight = band count); a dielectric
+//!   with a wavelength-dependent ior does the same when a path first meets it.
+//! - Bounces: `max_bounces` counts scattering events as pbrt's maxdepth;
+//!   Mitsuba's `max_depth = d` equals `max_bounces = d − 1`. Russian roulette
+//!   starts after the second bounce with survival probability
+//!   min(1, max-band throughput).
+//! - Performance (`camsim bench render`, Mitsuba `cornell_box()`, 256², 31
+//!   bands, max_bounces 6): ≈0.4–0.46 M paths per CPU-second on this shared
+//!   2-core machine (load ≈ 10 while measured). The 3.4 M paths/s on
+//!   2 threads is not reached; the hot spots are BVH traversal and the
+//!   watertight triangle test (≈ 50 %), spectral arithmetic ≈ 15 %.
 
 // `!(x > 0.0)` is deliberate throughout: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -84,4 +101,33 @@ pub fn render(
         .unwrap_or(glam::DMat4::IDENTITY);
     let names = scene.objects.iter().map(|o| o.name.clone()).collect();
     film::render_world(&world, camera, &to_world, film, settings, names)
+}
+
+/// Render several pixel rectangles of the same film (what measurements read),
+/// building the BVH once. Each result is bit-identical to the same pixels of
+/// a full render with the same settings; `settings.roi` is ignored.
+pub fn render_regions(
+    scene: &Scene,
+    camera: &dyn Camera,
+    film: &FilmSpec,
+    settings: &RenderSettings,
+    regions: &[Rect],
+) -> Result<Vec<OpticalImage>> {
+    let world = World::build(scene, &settings.grid, BvhKind::Bvh2)?;
+    let to_world = scene
+        .camera
+        .as_ref()
+        .map(|c| c.to_world)
+        .unwrap_or(glam::DMat4::IDENTITY);
+    let names: Vec<String> = scene.objects.iter().map(|o| o.name.clone()).collect();
+    regions
+        .iter()
+        .map(|r| {
+            let s = RenderSettings {
+                roi: Some(*r),
+                ..settings.clone()
+            };
+            film::render_world(&world, camera, &to_world, film, &s, names.clone())
+        })
+        .collect()
 }

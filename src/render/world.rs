@@ -175,7 +175,12 @@ impl World {
         }
         let mut add_mesh =
             |mesh: &crate::scene::Mesh, xf: Option<glam::DMat4>, object: u32| -> Result<()> {
-                check_mat(mesh.material, "mesh")?;
+                let oname = scene
+                    .objects
+                    .get(object as usize)
+                    .map(|o| o.name.as_str())
+                    .unwrap_or("?");
+                check_mat(mesh.material, &format!("mesh of object '{oname}'"))?;
                 let nrm_xf = xf.map(|m| m.inverse().transpose());
                 for tri in &mesh.indices {
                     let mut p = [Vec3::ZERO; 3];
@@ -183,7 +188,7 @@ impl World {
                         let idx = tri[k] as usize;
                         let v = *mesh.positions.get(idx).ok_or_else(|| {
                             Error::invalid(format!(
-                                "mesh index {idx} out of range ({} vertices)",
+                                "mesh of object '{oname}': index {idx} out of range ({} vertices)",
                                 mesh.positions.len()
                             ))
                         })?;
@@ -193,7 +198,9 @@ impl World {
                             None => v,
                         };
                         if !finite3(v) {
-                            return Err(Error::invalid("mesh vertex is not finite"));
+                            return Err(Error::invalid(format!(
+                                "mesh of object '{oname}': vertex {idx} is not finite"
+                            )));
                         }
                         p[k] = v.as_vec3();
                     }
