@@ -175,8 +175,14 @@ fn evaluate(case: &Case, rows: &mut Vec<Row>) {
         outz.coeff[0] -= shift;
         let esf_shifted = esf_of(&RtfCamera::new(rtf, film_esf).unwrap());
         let err = rmse_norm(&esf_shifted, &esf_p);
-        println!("{}: ESF RMSE with the output plane moved by planeoffsetinput ({shift:.2} mm): {err:.4}", case.name);
-        assert!(err > 0.02, "a displaced output plane should change the ESF (RMSE {err})");
+        println!(
+            "{}: ESF RMSE with the output plane moved by planeoffsetinput ({shift:.2} mm): {err:.4}",
+            case.name
+        );
+        assert!(
+            err > 0.02,
+            "a displaced output plane should change the ESF (RMSE {err})"
+        );
     }
     // The paper's pass/no-pass (minimum-area enclosing ellipses), degree 5.
     let opts = FitOptions {
