@@ -523,21 +523,25 @@ impl Prescription {
         if !(d.z > 0.0) {
             return Err(Blocked::Backwards);
         }
-        let z = self.vertex_z_mm();
+        // Vertex of surface i, accumulated from the rear vertex (z = 0).
+        let mut z_i = 0.0;
         for i in (0..self.surfaces.len()).rev() {
             let s = &self.surfaces[i];
+            if i + 1 < self.surfaces.len() {
+                z_i += s.thickness_mm;
+            }
             let (hit, normal) = if s.radius_mm == 0.0 {
                 if d.z <= 0.0 {
                     return Err(Blocked::Aperture(i));
                 }
-                let t = (z[i] - o.z) / d.z;
+                let t = (z_i - o.z) / d.z;
                 if t < 0.0 {
                     return Err(Blocked::Aperture(i));
                 }
                 (o + d * t, DVec3::new(0.0, 0.0, -1.0))
             } else {
                 let r = s.radius_mm;
-                let c = DVec3::new(0.0, 0.0, z[i] - r);
+                let c = DVec3::new(0.0, 0.0, z_i - r);
                 let oc = o - c;
                 let b = oc.dot(d);
                 let cc = oc.length_squared() - r * r;
