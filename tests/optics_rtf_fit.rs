@@ -148,6 +148,7 @@ fn evaluate(case: &Case, rows: &mut Vec<Row>) {
         pass_method: PassMethod::AreaEllipses,
         ..Default::default()
     };
+    let mut degree6 = None;
     for (d, (rtf, rep)) in DEGREES
         .iter()
         .zip(fit_rtf_degrees(&lens, &[550.0], &DEGREES, &opts).unwrap())
@@ -159,6 +160,28 @@ fn evaluate(case: &Case, rows: &mut Vec<Row>) {
             format!("rtf-degree{d}-area-ellipses"),
             &back,
             rep[0].condition_number,
+        );
+        if *d == 6 {
+            degree6 = Some(back);
+        }
+    }
+    // Output-plane z convention (rtf.rs): moving the output plane by
+    // planeoffsetinput (the "measured from the rear vertex" reading) must
+    // visibly defocus the near object — so agreement above tests the convention.
+    if case.name == "dgauss28deg" {
+        let mut rtf = degree6.unwrap();
+        let shift = rtf.plane_offset_input_mm;
+        let outz = rtf.waves[0].outputs[2].as_mut().unwrap();
+        outz.coeff[0] -= shift;
+        let esf_shifted = esf_of(&RtfCamera::new(rtf, film_esf).unwrap());
+        let err = rmse_norm(&esf_shifted, &esf_p);
+        println!(
+            "{}: ESF RMSE with the output plane moved by planeoffsetinput ({shift:.2} mm): {err:.4}",
+            case.name
+        );
+        assert!(
+            err > 0.02,
+            "a displaced output plane should change the ESF (RMSE {err})"
         );
     }
     // The paper's pass/no-pass (minimum-area enclosing ellipses), degree 5.

@@ -14,6 +14,11 @@
 //! Per-wavelength indices: in JSON, `ior` may be an array matched to a
 //! top-level `wave` (or `wavelength_nm`) array in nm; interpolated linearly.
 //!
+//! The trace is sequential, as in lens-design programs: each surface is
+//! intersected in file order on the hemisphere that holds its vertex, even
+//! when that point lies behind the previous one (zero spacing between a
+//! stop and a lens vertex); rays are blocked by semi-apertures, misses and TIR.
+//!
 //! Trace frame ("lens frame", mm): z along the axis towards the scene, the
 //! rear vertex (last surface) at z = 0, the film at z = −D (D = film distance,
 //! film to rear vertex). Camera space (metres) puts the film centre at the
@@ -523,21 +528,25 @@ impl Prescription {
         if !(d.z > 0.0) {
             return Err(Blocked::Backwards);
         }
-        let z = self.vertex_z_mm();
+        // Vertex of surface i, accumulated from the rear vertex (z = 0).
+        let mut z_i = 0.0;
         for i in (0..self.surfaces.len()).rev() {
             let s = &self.surfaces[i];
+            if i + 1 < self.surfaces.len() {
+                z_i += s.thickness_mm;
+            }
             let (hit, normal) = if s.radius_mm == 0.0 {
                 if d.z <= 0.0 {
                     return Err(Blocked::Aperture(i));
                 }
-                let t = (z[i] - o.z) / d.z;
-                if t < 0.0 {
-                    return Err(Blocked::Aperture(i));
-                }
+                // Sequential trace: surfaces are met in file order even when
+                // one lies behind the previous (zero or negative spacing, as
+                // in Zemax files with the stop at a lens vertex), so t may be < 0.
+                let t = (z_i - o.z) / d.z;
                 (o + d * t, DVec3::new(0.0, 0.0, -1.0))
             } else {
                 let r = s.radius_mm;
-                let c = DVec3::new(0.0, 0.0, z[i] - r);
+                let c = DVec3::new(0.0, 0.0, z_i - r);
                 let oc = o - c;
                 let b = oc.dot(d);
                 let cc = oc.length_squared() - r * r;
@@ -548,10 +557,8 @@ impl Prescription {
                 let sq = disc.sqrt();
                 // Film → scene: R > 0 (centre towards the film) is met on the far
                 // side of the sphere, R < 0 on the near side.
+                // t < 0 is allowed (sequential trace, see the stop above).
                 let t = if r > 0.0 { -b + sq } else { -b - sq };
-                if !(t > 0.0) {
-                    return Err(Blocked::Aperture(i));
-                }
                 let p = o + d * t;
                 let mut nrm = (p - c) / r.abs();
                 if nrm.dot(d) > 0.0 {

@@ -1,0 +1,105 @@
+//! `camsim lens …` commands: CSV with one header row, numbers that agree
+//! with first-order optics, and the fit-rtf → RTF round trip.
+
+use std::process::Command;
+
+fn camsim(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_camsim"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn rows(csv: &str) -> (Vec<String>, Vec<Vec<f64>>) {
+    let mut l = csv.lines();
+    let header = l.next().unwrap().split(',').map(String::from).collect();
+    let rows = l
+        .map(|r| r.split(',').map(|x| x.parse().unwrap()).collect())
+        .collect();
+    (header, rows)
+}
+
+/// Tessar (Zemax sample): f = 100 mm, f/5.45 by its metadata; paraxial
+/// values agree within 0.2 %, the traced working f-number within 2 %.
+#[test]
+fn optics_cli_lens_info_and_esf() {
+    let (ok, out, err) = camsim(&["lens", "info", "lenses/prescriptions/tessar-zemax.json"]);
+    assert!(ok, "{err}");
+    let (h, r) = rows(&out);
+    assert_eq!(h[0], "focal_length_mm");
+    assert_eq!(r.len(), 1);
+    assert!((r[0][0] / 100.0 - 1.0).abs() < 2e-3, "f = {}", r[0][0]);
+    assert!((r[0][1] / 5.45 - 1.0).abs() < 2e-3, "N = {}", r[0][1]);
+    assert!(
+        (r[0][2] / r[0][1] - 1.0).abs() < 0.02,
+        "working N = {}",
+        r[0][2]
+    );
+
+    let (ok, out, err) = camsim(&[
+        "lens",
+        "esf",
+        "lenses/prescriptions/tessar-zemax.json",
+        "--object-distance-m",
+        "1.3",
+    ]);
+    assert!(ok, "{err}");
+    let (h, r) = rows(&out);
+    assert_eq!(h, ["position_um", "esf", "lsf"]);
+    // Monotone up to the quadrature granularity of the 128×128 pupil grid.
+    assert!(
+        r.windows(2).all(|w| w[1][1] >= w[0][1] - 2e-3),
+        "ESF must not decrease"
+    );
+    assert!(r[0][1] < 0.01 && r.last().unwrap()[1] > 0.99);
+
+    let (ok, _, err) = camsim(&["lens", "info", "lenses/prescriptions/nope.json"]);
+    assert!(!ok && err.contains("nope.json"), "{err}");
+}
+
+/// fit-rtf writes an RTF that `lens info` reads back with the same focal length.
+#[test]
+fn optics_cli_fit_rtf_round_trip() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_path = dir.path().join("tessar-rtf.json");
+    let p = out_path.to_str().unwrap();
+    let (ok, out, err) = camsim(&[
+        "lens",
+        "fit-rtf",
+        "lenses/prescriptions/tessar-zemax.json",
+        "--degree",
+        "3",
+        "--out",
+        p,
+    ]);
+    assert!(ok, "{err}");
+    let (h, r) = rows(
+        &out.lines()
+            .map(|l| {
+                l.split(',')
+                    .enumerate()
+                    .map(|(i, x)| if i == 1 { "0" } else { x })
+                    .collect::<Vec<_>>()
+                    .join(",")
+            })
+            .collect::<Vec<_>>()
+            .join("\n"),
+    );
+    assert_eq!(h[5], "condition_number");
+    assert_eq!(r.len(), 5, "outx outy outdx outdy outdz");
+    assert!(r.iter().all(|row| row[5].is_finite() && row[6].is_finite()));
+    let (ok, out, err) = camsim(&["lens", "info", p]);
+    assert!(ok, "{err}");
+    let (_, r) = rows(&out);
+    // Focal length from output angles of a 5 %-field film point: within 1 %.
+    assert!(
+        (r[0][0] / 100.086 - 1.0).abs() < 0.01,
+        "RTF focal length {}",
+        r[0][0]
+    );
+}
