@@ -258,3 +258,23 @@ fn bad_optical_images_are_errors_not_panics() {
     oi.irradiance[0] = f32::NAN;
     assert!(simulate(&cfg, &oi, 1).is_err());
 }
+
+/// Extreme brightness (1e30 W/(m²·nm), overflowing f32 electron rates) saturates
+/// cleanly at the white level; zero light gives the black level ± noise.
+#[test]
+fn extreme_irradiance_saturates_cleanly() {
+    let cfg = imx363();
+    let grid = WavelengthGrid::new(400.0, 700.0, 10.0).unwrap();
+    let mut oi = OpticalImage::new(4032, 3024, Rect::new(0, 0, 8, 8), 1.4e-6, grid.clone());
+    oi.irradiance.iter_mut().for_each(|v| *v = 1e30);
+    let im = simulate(&cfg, &oi, 1).unwrap();
+    assert!(im.dv.iter().all(|&v| v == 1023.0));
+    assert!(
+        im.electrons
+            .iter()
+            .all(|&e| e.is_finite() && (e as f64) <= cfg.full_well_e() + 1e-3)
+    );
+    let dark = OpticalImage::new(4032, 3024, Rect::new(0, 0, 64, 64), 1.4e-6, grid);
+    let im = simulate(&cfg, &dark, 1).unwrap();
+    assert!(im.dv.iter().all(|&v| (60.0..=68.0).contains(&v)));
+}
