@@ -71,6 +71,8 @@ pub struct FlatOptions {
     /// Window size (centred on the sensor).
     pub width: u32,
     pub height: u32,
+    /// Also write each frame as DNG (`frame_0000.dng` …).
+    pub dng: bool,
 }
 
 fn grid() -> WavelengthGrid {
@@ -117,7 +119,8 @@ pub fn frame_seed(seed: u64, i: usize) -> u64 {
         .wrapping_add(i as u64)
 }
 
-/// Simulate and write a flat-field sequence to `out`. Returns the files written.
+/// Simulate and write a flat-field sequence to `out`. Returns the files written
+/// (`settings.csv` last).
 pub fn write_flat_sequence(
     cfg: &SensorConfig,
     o: &FlatOptions,
@@ -160,6 +163,11 @@ pub fn write_flat_sequence(
             .collect();
         write_atomic(&p, &png16_bytes(w, h, &dv)?)?;
         files.push(p);
+        if o.dng {
+            let d = out.join(format!("frame_{i:04}.dng"));
+            super::output::write_dng(&d, &f.image, &c)?;
+            files.push(d);
+        }
     }
     let rates = flat_rate_e_per_s(&c, &spec, &grid());
     let mut rows_out: Vec<(String, String)> = vec![
