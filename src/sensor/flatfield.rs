@@ -11,6 +11,7 @@
 //! over 400–700 nm (10 nm grid), so E is always the mean spectral irradiance.
 
 use super::calibrate::FlatSequence;
+pub use super::config::cfa_name;
 use super::config::{Exposure, SensorConfig};
 use super::output::{png16_bytes, read_png16};
 use super::pipeline::{flat_rate_e_per_s, simulate_flat};
@@ -100,17 +101,6 @@ pub fn flat_spectrum(e: f64, spectrum: Option<&str>) -> Result<Spectrum> {
             Ok(s.scaled(e / mean))
         }
     }
-}
-
-/// Bayer name of a 2×2 RGB pattern ("rggb" …), or "mono".
-pub fn cfa_name(c: &CfaPattern) -> String {
-    if c.channels.len() == 1 {
-        return "mono".into();
-    }
-    c.cells
-        .iter()
-        .map(|&i| c.channels[i as usize].chars().next().unwrap_or('?'))
-        .collect()
 }
 
 /// Frame seed `i` of a sequence seeded `seed`.
