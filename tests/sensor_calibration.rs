@@ -318,6 +318,7 @@ fn cli_simulate_then_calibrate() {
             "96x96",
             "--seed",
             &format!("{i}"),
+            "--dng",
             "--out",
             dir.path().join(format!("light{i}")).to_str().unwrap(),
         ]);
@@ -343,6 +344,7 @@ fn cli_simulate_then_calibrate() {
         assert!(o.status.success());
     }
     assert!(dir.path().join("light0/frame_0003.png").exists());
+    assert!(dir.path().join("light0/frame_0003.dng").exists());
     let s = std::fs::read_to_string(dir.path().join("light0/settings.csv")).unwrap();
     assert!(
         s.starts_with("key,value\n")

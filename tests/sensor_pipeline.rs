@@ -258,3 +258,41 @@ fn bad_optical_images_are_errors_not_panics() {
     oi.irradiance[0] = f32::NAN;
     assert!(simulate(&cfg, &oi, 1).is_err());
 }
+
+/// Extreme brightness (1e30 W/(m²·nm), overflowing f32 electron rates) saturates
+/// cleanly at the white level; zero light gives the black level ± noise.
+#[test]
+fn extreme_irradiance_saturates_cleanly() {
+    let cfg = imx363();
+    let grid = WavelengthGrid::new(400.0, 700.0, 10.0).unwrap();
+    let mut oi = OpticalImage::new(4032, 3024, Rect::new(0, 0, 8, 8), 1.4e-6, grid.clone());
+    oi.irradiance.iter_mut().for_each(|v| *v = 1e30);
+    let im = simulate(&cfg, &oi, 1).unwrap();
+    assert!(im.dv.iter().all(|&v| v == 1023.0));
+    assert!(
+        im.electrons
+            .iter()
+            .all(|&e| e.is_finite() && (e as f64) <= cfg.full_well_e() + 1e-3)
+    );
+    let dark = OpticalImage::new(4032, 3024, Rect::new(0, 0, 64, 64), 1.4e-6, grid);
+    let im = simulate(&cfg, &dark, 1).unwrap();
+    assert!(im.dv.iter().all(|&v| (60.0..=68.0).contains(&v)));
+}
+
+/// `simulate` (electrons written over the rate buffer) and `simulate_frame` (keeps
+/// volts and means) are the same model: identical DV and electrons.
+#[test]
+fn simulate_and_simulate_frame_agree() {
+    let cfg = imx363();
+    let grid = WavelengthGrid::new(400.0, 700.0, 10.0).unwrap();
+    let mut oi = OpticalImage::new(4032, 3024, Rect::new(1000, 1000, 37, 23), 1.4e-6, grid);
+    for (i, v) in oi.irradiance.iter_mut().enumerate() {
+        *v = 1e-4 * (i % 13) as f32;
+    }
+    let a = simulate(&cfg, &oi, 5).unwrap();
+    let b = simulate_frame(&cfg, &oi, 5).unwrap();
+    assert_eq!(a.dv, b.image.dv);
+    assert_eq!(a.electrons, b.image.electrons);
+    assert_eq!(b.volts.len(), a.dv.len());
+    assert!(a.dv.iter().any(|&v| v > 70.0));
+}

@@ -42,6 +42,9 @@ pub struct SimulateArgs {
     /// Frame size WxH, centred on the sensor (default 512x512).
     #[arg(long, default_value = "512x512")]
     pub size: String,
+    /// Also write every frame as DNG (raw converters open it).
+    #[arg(long)]
+    pub dng: bool,
 }
 
 #[derive(Args)]
@@ -85,6 +88,7 @@ fn simulate(a: SimulateArgs) -> Result<i32> {
         seed: a.seed.unwrap_or(1),
         width,
         height,
+        dng: a.dng,
     };
     let files = write_flat_sequence(&cfg, &o, &a.out)?;
     eprintln!(

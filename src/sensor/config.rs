@@ -298,6 +298,17 @@ fn suggestion(word: &str, names: &[&str]) -> Option<String> {
     did_you_mean(word, names.iter().copied()).map(|s| format!("did you mean '{s}'?"))
 }
 
+/// Bayer name of a pattern ("rggb" …) or "mono".
+pub fn cfa_name(c: &CfaPattern) -> String {
+    if c.channels.len() == 1 {
+        return "mono".into();
+    }
+    c.cells
+        .iter()
+        .map(|&i| c.channels[i as usize].chars().next().unwrap_or('?'))
+        .collect()
+}
+
 fn resolve_spectrum(r: &str, base: &Path) -> Result<Spectrum, String> {
     library::resolve(r, base)
 }
@@ -537,6 +548,64 @@ impl SensorConfig {
             return Err("conversion gain must be finite and > 0".into());
         }
         Ok(())
+    }
+
+    /// The resolved scalar settings under their file names (for manifests and
+    /// reports); `apply_overrides` of this map onto any config reproduces the scalars.
+    pub fn resolved_params(&self) -> Params {
+        let mut p = Params::new();
+        let n = |x: f64| Value::Number(x);
+        p.set("name", Value::String(self.name.clone()));
+        if let Some(r) = self.rows {
+            p.set("rows", n(r as f64));
+        }
+        if let Some(c) = self.cols {
+            p.set("cols", n(c as f64));
+        }
+        p.set("pixel-size-um", n(self.pixel_size_m * 1e6));
+        p.set("fill-factor", n(self.fill_factor));
+        p.set("cfa", Value::String(cfa_name(&self.cfa)));
+        p.set("ir-filter", Value::String(self.ir_filter_ref.clone()));
+        p.set("well-capacity-e", n(self.well_capacity_e));
+        p.set("voltage-swing-v", n(self.voltage_swing_v));
+        p.set(
+            "conversion-gain-uv-per-e",
+            n(self.conversion_gain_v_per_e() * 1e6),
+        );
+        p.set("analog-gain", n(self.analog_gain));
+        p.set("black-level-dv", n(self.black_level_dv));
+        p.set("bit-depth", n(self.bit_depth as f64));
+        match self.exposure {
+            Exposure::Seconds(t) => p.set("exposure-s", n(t)),
+            Exposure::Auto { level } => {
+                p.set("exposure-s", Value::String("auto".into()));
+                p.set("auto-exposure-level", n(level));
+            }
+        }
+        p.set("read-noise-mv", n(self.read_noise_v * 1e3));
+        p.set("reset-noise-mv", n(self.reset_noise_v * 1e3));
+        p.set("dsnu-mv", n(self.dsnu_v * 1e3));
+        p.set("prnu-percent", n(self.prnu * 100.0));
+        p.set("dark-voltage-mv-per-s", n(self.dark_voltage_v_per_s * 1e3));
+        p.set("column-fpn-offset-mv", n(self.column_fpn_offset_v * 1e3));
+        p.set("column-fpn-gain-percent", n(self.column_fpn_gain * 100.0));
+        p.set("fpn-seed", n(self.fpn_seed as f64));
+        let s = &self.sources;
+        for (k, v) in [
+            ("photon-noise", s.photon_noise),
+            ("dark-current", s.dark_current),
+            ("dsnu", s.dsnu),
+            ("prnu", s.prnu),
+            ("read-noise", s.read_noise),
+            ("reset-noise", s.reset_noise),
+            ("column-fpn", s.column_fpn),
+            ("pixel-vignetting", s.pixel_vignetting),
+            ("clipping", s.clipping),
+            ("quantization", s.quantization),
+        ] {
+            p.set(k, Value::Bool(v));
+        }
+        p
     }
 
     /// Apply inline overrides (experiment `sensor "…" exposure-s=0.2`). Names are the
@@ -1125,6 +1194,22 @@ mod tests {
         p.set("exposure-sec", Value::Number(0.2));
         let e = c.apply_overrides(&p).unwrap_err();
         assert!(e.contains("did you mean 'exposure-s'"), "{e}");
+    }
+
+    #[test]
+    fn resolved_params_round_trip() {
+        let mut a = parse(
+            "cfa \"gbrg\"\nexposure-s 0.3\nread-noise-mv 0.2\nprnu #false\nrows 10\ncols 12\n",
+        )
+        .unwrap();
+        a.conversion_gain = ConversionGain::DvPerElectron(0.2);
+        let p = a.resolved_params();
+        let mut b = SensorConfig::generic();
+        b.apply_overrides(&p).unwrap();
+        assert_eq!(b.resolved_params(), p);
+        assert!((b.conversion_gain_dv_per_e() - 0.2).abs() < 1e-12);
+        assert_eq!(b.cfa, a.cfa);
+        assert!(!b.sources.prnu);
     }
 
     #[test]

@@ -11,6 +11,7 @@
 //! over 400–700 nm (10 nm grid), so E is always the mean spectral irradiance.
 
 use super::calibrate::FlatSequence;
+pub use super::config::cfa_name;
 use super::config::{Exposure, SensorConfig};
 use super::output::{png16_bytes, read_png16};
 use super::pipeline::{flat_rate_e_per_s, simulate_flat};
@@ -71,6 +72,8 @@ pub struct FlatOptions {
     /// Window size (centred on the sensor).
     pub width: u32,
     pub height: u32,
+    /// Also write each frame as DNG (`frame_0000.dng` …).
+    pub dng: bool,
 }
 
 fn grid() -> WavelengthGrid {
@@ -100,24 +103,14 @@ pub fn flat_spectrum(e: f64, spectrum: Option<&str>) -> Result<Spectrum> {
     }
 }
 
-/// Bayer name of a 2×2 RGB pattern ("rggb" …), or "mono".
-pub fn cfa_name(c: &CfaPattern) -> String {
-    if c.channels.len() == 1 {
-        return "mono".into();
-    }
-    c.cells
-        .iter()
-        .map(|&i| c.channels[i as usize].chars().next().unwrap_or('?'))
-        .collect()
-}
-
 /// Frame seed `i` of a sequence seeded `seed`.
 pub fn frame_seed(seed: u64, i: usize) -> u64 {
     seed.wrapping_mul(0x9e37_79b9_7f4a_7c15)
         .wrapping_add(i as u64)
 }
 
-/// Simulate and write a flat-field sequence to `out`. Returns the files written.
+/// Simulate and write a flat-field sequence to `out`. Returns the files written
+/// (`settings.csv` last).
 pub fn write_flat_sequence(
     cfg: &SensorConfig,
     o: &FlatOptions,
@@ -160,6 +153,11 @@ pub fn write_flat_sequence(
             .collect();
         write_atomic(&p, &png16_bytes(w, h, &dv)?)?;
         files.push(p);
+        if o.dng {
+            let d = out.join(format!("frame_{i:04}.dng"));
+            super::output::write_dng(&d, &f.image, &c)?;
+            files.push(d);
+        }
     }
     let rates = flat_rate_e_per_s(&c, &spec, &grid());
     let mut rows_out: Vec<(String, String)> = vec![

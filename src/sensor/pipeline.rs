@@ -423,7 +423,7 @@ fn noise_pass(
     cfg: &SensorConfig,
     full: (u32, u32),
     window: Rect,
-    mut rate: Vec<f32>,
+    rate: Vec<f32>,
     seed: u64,
     keep: bool,
 ) -> Result<SensorFrame> {
@@ -461,19 +461,18 @@ fn noise_pass(
     let n = window.area() as usize;
     let ww = window.w as usize;
     let mut dv = vec![0f32; n];
-    let mut electrons = vec![0f32; n];
-    let mut volts = if keep { vec![0f32; n] } else { vec![] };
-    // Mean electrons (in place over the rate buffer).
-    rate.par_iter_mut()
-        .for_each(|r| *r = (*r as f64 * t + dark_e) as f32);
-    let mean = rate;
-    let body = |r: usize, dv_row: &mut [f32], e_row: &mut [f32], v_row: Option<&mut [f32]>| {
+    let to_mean = |r: f32| (r as f64 * t + dark_e) as f32;
+    let body = |r: usize,
+                mean_row: &[f32],
+                dv_row: &mut [f32],
+                e_row: &mut [f32],
+                v_row: Option<&mut [f32]>| {
         let yf = (window.y as usize + r) as u64;
         let mut v_row = v_row;
         for c in 0..ww {
             let xf = window.x as u64 + c as u64;
             let gi = yf * full.0 as u64 + xf;
-            let mu = mean[r * ww + c] as f64;
+            let mu = mean_row[c] as f64;
             let mut e = if src.photon_noise {
                 PixelRng::new(seed, stream::PHOTON, gi).poisson(mu)
             } else {
@@ -523,18 +522,31 @@ fn noise_pass(
             }
         }
     };
-    if keep {
+    let (electrons, mean) = if keep {
+        // Mean electrons in place over the rate buffer, kept; electrons separate.
+        let mut mean = rate;
+        mean.par_iter_mut().for_each(|r| *r = to_mean(*r));
+        let mut electrons = vec![0f32; n];
+        let mut volts = vec![0f32; n];
         dv.par_chunks_mut(ww)
             .zip(electrons.par_chunks_mut(ww))
             .zip(volts.par_chunks_mut(ww))
             .enumerate()
-            .for_each(|(r, ((d, e), v))| body(r, d, e, Some(v)));
+            .for_each(|(r, ((d, e), v))| body(r, &mean[r * ww..(r + 1) * ww], d, e, Some(v)));
+        (electrons, Some((mean, volts)))
     } else {
+        // Electrons overwrite the rate buffer row by row (one frame-sized buffer less).
+        let mut buf = rate;
         dv.par_chunks_mut(ww)
-            .zip(electrons.par_chunks_mut(ww))
+            .zip(buf.par_chunks_mut(ww))
             .enumerate()
-            .for_each(|(r, (d, e))| body(r, d, e, None));
-    }
+            .for_each(|(r, (d, row))| {
+                let m: Vec<f32> = row.iter().map(|&x| to_mean(x)).collect();
+                body(r, &m, d, row, None)
+            });
+        (buf, None)
+    };
+    let (mean, volts) = mean.unwrap_or_default();
     let image = SensorImage {
         full_width: full.0,
         full_height: full.1,
@@ -553,6 +565,6 @@ fn noise_pass(
     Ok(SensorFrame {
         image,
         volts,
-        mean_electrons: if keep { mean } else { vec![] },
+        mean_electrons: mean,
     })
 }

@@ -85,11 +85,15 @@ impl PixelRng {
             }
         }
     }
-    /// Exact Poisson variate with mean `mu` (≥ 0; non-finite or negative gives 0).
+    /// Exact Poisson variate with mean `mu` (NaN or ≤ 0 gives 0; +∞ gives +∞, which
+    /// the pipeline's well clipping then bounds).
     #[inline]
     pub fn poisson(&mut self, mu: f64) -> f64 {
         if mu.is_nan() || mu <= 0.0 {
             return 0.0;
+        }
+        if mu == f64::INFINITY {
+            return mu;
         }
         if mu < 10.0 {
             self.poisson_inversion(mu)
@@ -348,5 +352,8 @@ mod tests {
         assert!(a.iter().zip(&c).all(|(x, y)| x != y));
         assert!(PixelRng::new(0, 0, 0).poisson(f64::NAN) == 0.0);
         assert!(PixelRng::new(0, 0, 0).poisson(-1.0) == 0.0);
+        assert!(PixelRng::new(0, 0, 0).poisson(f64::INFINITY).is_infinite());
+        let k = PixelRng::new(0, 0, 0).poisson(1e15);
+        assert!((k - 1e15).abs() < 1e9, "{k}");
     }
 }
