@@ -180,7 +180,7 @@ pub fn uniform_regions(plane: &Plane, opts: &NoiseOptions) -> Result<Vec<Region>
             plane.width, plane.height
         )));
     }
-    if !(opts.conversion_gain_dv_per_e > 0.0) {
+    if opts.conversion_gain_dv_per_e.is_nan() || opts.conversion_gain_dv_per_e <= 0.0 {
         return Err(Error::invalid("conversion gain must be > 0 DV/e-"));
     }
     let mut rng = SplitMix64(opts.seed);

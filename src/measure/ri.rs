@@ -74,7 +74,7 @@ pub fn relative_illumination(
         }
     }
     let m0 = mean(&bins[0]);
-    if bins[0].len() < 2 || !(m0 > 0.0) {
+    if bins[0].len() < 2 || m0.is_nan() || m0 <= 0.0 {
         return Err(Error::invalid(
             "flat field: the central annulus is empty or not brighter than the black level",
         ));
