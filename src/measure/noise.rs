@@ -83,6 +83,16 @@ pub struct Region {
     pub rmse_poly: f64,
 }
 
+impl NoiseOptions {
+    /// Defaults with the sensor image's conversion gain.
+    pub fn for_sensor(img: &crate::image::SensorImage) -> Self {
+        Self {
+            conversion_gain_dv_per_e: img.conversion_gain_dv_per_e,
+            ..Default::default()
+        }
+    }
+}
+
 /// Classify one region (pixels of the channel inside `rect`).
 pub fn classify(
     plane: &Plane,
