@@ -716,34 +716,6 @@ pub fn sfr_of_region(plane: &Plane, roi: Rect, opts: &SfrOptions) -> Result<(Sfr
     Ok((sfr(&sub, opts)?, roi))
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn hamming_window_peaks_at_mid() {
-        let w = ahamming(11, 5.0);
-        assert!(
-            (w[5] - 1.0).abs() < 1e-12
-                && (w[0] - 0.08).abs() < 1e-12
-                && (w[10] - 0.08).abs() < 1e-12
-        );
-    }
-
-    #[test]
-    fn rejects_flat_and_axis_aligned_edges() {
-        let flat = Plane::new(32, 32, vec![1.0; 1024]).unwrap();
-        assert!(sfr(&flat, &SfrOptions::default()).is_err());
-        let d: Vec<f64> = (0..32 * 32)
-            .map(|i| if i % 32 < 16 { 0.1 } else { 0.9 })
-            .collect();
-        let e = sfr(&Plane::new(32, 32, d).unwrap(), &SfrOptions::default())
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("too close to the pixel grid"), "{e}");
-    }
-}
-
 /// SFR of a labelled slanted-edge object in a sensor image. The region of
 /// interest is the object's bounding box inset by 15 % per side, shrunk further
 /// (in 5 % steps, up to 40 %) until every pixel in it carries the object's
@@ -821,4 +793,32 @@ pub fn object_roi(
     Err(Error::invalid(format!(
         "object '{object}' has no solid interior of at least 8×8 px for an SFR region"
     )))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hamming_window_peaks_at_mid() {
+        let w = ahamming(11, 5.0);
+        assert!(
+            (w[5] - 1.0).abs() < 1e-12
+                && (w[0] - 0.08).abs() < 1e-12
+                && (w[10] - 0.08).abs() < 1e-12
+        );
+    }
+
+    #[test]
+    fn rejects_flat_and_axis_aligned_edges() {
+        let flat = Plane::new(32, 32, vec![1.0; 1024]).unwrap();
+        assert!(sfr(&flat, &SfrOptions::default()).is_err());
+        let d: Vec<f64> = (0..32 * 32)
+            .map(|i| if i % 32 < 16 { 0.1 } else { 0.9 })
+            .collect();
+        let e = sfr(&Plane::new(32, 32, d).unwrap(), &SfrOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("too close to the pixel grid"), "{e}");
+    }
 }
