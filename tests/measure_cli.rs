@@ -165,3 +165,115 @@ fn measure_sfr_on_png_and_dng() {
     assert_eq!(code, 3);
     assert!(err.contains("outside"), "{err}");
 }
+
+fn write_png16_gray(path: &std::path::Path, w: usize, h: usize, v: &[u16]) {
+    let f = std::fs::File::create(path).unwrap();
+    let mut e = png::Encoder::new(std::io::BufWriter::new(f), w as u32, h as u32);
+    e.set_color(png::ColorType::Grayscale);
+    e.set_depth(png::BitDepth::Sixteen);
+    let mut wr = e.write_header().unwrap();
+    wr.write_image_data(&v.iter().flat_map(|x| x.to_be_bytes()).collect::<Vec<u8>>())
+        .unwrap();
+    wr.finish().unwrap();
+}
+
+#[test]
+fn measure_mcc_profile_noise_ri_on_a_dng_with_a_label_map() {
+    let dir = tempfile::tempdir().unwrap();
+    // 6×4 chart of 20-px patches (gaps 4 px) on a 160×112 RGGB mosaic, black level 64:
+    // patch k has r = 10k, g = 20k, b = 5k + 3 DV above black; background 2 DV.
+    let (w, h) = (160usize, 112usize);
+    let cfa = CfaPattern::bayer("rggb").unwrap();
+    let (mut dv, mut lab) = (vec![0u16; w * h], vec![0u16; w * h]);
+    for y in 0..h {
+        for x in 0..w {
+            let (px, py, ix, iy) = (
+                (x as i64 - 8) / 24,
+                (y as i64 - 8) / 24,
+                (x as i64 - 8) % 24,
+                (y as i64 - 8) % 24,
+            );
+            let inside = x >= 8 && y >= 8 && px < 6 && py < 4 && ix < 20 && iy < 20;
+            let k = (py * 6 + px + 1) as u16;
+            let c = cfa.channel_at(x as u32, y as u32);
+            dv[y * w + x] = 64
+                + if inside {
+                    [10 * k, 20 * k, 5 * k + 3][c]
+                } else {
+                    2
+                };
+            lab[y * w + x] = if inside { k } else { 25 };
+        }
+    }
+    let dng = dir.path().join("chart.dng");
+    write_dng_cfa(&dng, w as u32, h as u32, &dv, &cfa, 64.0, 1023.0).unwrap();
+    let labels = dir.path().join("labels.png");
+    write_png16_gray(&labels, w, h, &lab);
+    let names = dir.path().join("names.txt");
+    let mut nm: Vec<String> = (1..=24).map(|k| format!("mcc/patch{k:02}")).collect();
+    nm.push("wall".into());
+    std::fs::write(&names, nm.join("\n")).unwrap();
+    let (l, n) = (labels.to_str().unwrap(), names.to_str().unwrap());
+    let img = dng.to_str().unwrap();
+
+    let (code, out, err) = camsim(&["measure", "mcc", img, "--labels", l, "--names", n]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.starts_with("patch,channel,mean_dv,stderr_dv,pixels\n"));
+    assert!(out.contains("\n7,g,140.000000,0.000000,"), "{out}");
+    assert_eq!(out.lines().count(), 1 + 72);
+
+    let objs = (19..=24)
+        .map(|k| format!("mcc/patch{k:02}"))
+        .collect::<Vec<_>>()
+        .join(",");
+    let (code, out, err) = camsim(&[
+        "measure",
+        "profile",
+        img,
+        "--labels",
+        l,
+        "--names",
+        n,
+        "--objects",
+        &objs,
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        out.starts_with("position_px,profile_r,profile_g,profile_b,ratio_g_r\n"),
+        "{out}"
+    );
+    // Inside every patch G/R = 2 exactly (no blur in this chart).
+    assert!(out.contains("# mcc/patch21/g/r=2 ± 0 1"), "{out}");
+
+    let (code, out, err) = camsim(&[
+        "measure",
+        "noise",
+        img,
+        "--conversion-gain",
+        "0.17",
+        "--regions",
+        "50",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(out.lines().filter(|l| !l.starts_with('#')).count(), 51);
+    assert!(out.contains("# regions_accepted="), "{out}");
+
+    let (code, out, err) = camsim(&["measure", "ri", img, "--pixel-um", "1.4", "--bins", "5"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.starts_with("field_height_mm,ri,stderr\n"), "{out}");
+
+    // A label map of the wrong size is an error naming it.
+    let small = dir.path().join("small.png");
+    write_png16_gray(&small, 4, 4, &[0; 16]);
+    let (code, _, err) = camsim(&[
+        "measure",
+        "mcc",
+        img,
+        "--labels",
+        small.to_str().unwrap(),
+        "--names",
+        n,
+    ]);
+    assert_eq!(code, 3);
+    assert!(err.contains("small.png") && err.contains("4×4"), "{err}");
+}

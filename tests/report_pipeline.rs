@@ -384,6 +384,12 @@ fn diff_cli_reads_directories_and_git_revisions() {
     assert!(repo.join("d.html").exists());
     let (code, out, _) = camsim(&["diff", "HEAD", "results"], &repo);
     assert_eq!(code, 0, "{out}");
+    let (code, out, err) = camsim(&["report", "results"], &repo);
+    assert_eq!(code, 0, "{out}\n{err}");
+    assert!(
+        repo.join("results/fig-test/report.html").exists()
+            && repo.join("results/index.html").exists()
+    );
     let (code, _, err) = camsim(&["diff", "no-such-rev", "HEAD"], &repo);
     assert_eq!(code, 3);
     assert!(

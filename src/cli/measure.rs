@@ -135,12 +135,10 @@ fn run_sfr(a: SfrArgs) -> Result<i32> {
     let img = read_image(&a.image)?;
     let plane = roi_plane(&img, &a.channel, &a.roi)?;
     let pitch_m = a.pixel_um.map(|p| p * 1e-6);
-    if let Some(p) = a.pixel_um {
-        if !(p > 0.0 && p.is_finite()) {
-            return Err(Error::invalid(format!(
-                "--pixel-um {p}: must be a positive number of micrometres"
-            )));
-        }
+    if let Some(p) = a.pixel_um.filter(|p| !p.is_finite() || *p <= 0.0) {
+        return Err(Error::invalid(format!(
+            "--pixel-um {p}: must be a positive number of micrometres"
+        )));
     }
     let opts = sfr::SfrOptions {
         channel: sfr::SfrChannel::parse(&a.channel)?,

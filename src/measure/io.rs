@@ -516,6 +516,45 @@ pub fn write_dng_cfa(
     crate::diag::write_atomic(path, &out)
 }
 
+/// Object labels for a captured image: a grey PNG whose value k > 0 marks
+/// object k and a text file whose k-th line (1-based) names it; value 0 is
+/// "no object". Returns per-pixel label ids (k − 1, or `scene::NO_OBJECT`) and names.
+pub fn read_label_map(
+    png_path: &Path,
+    names_path: &Path,
+) -> Result<(usize, usize, Vec<u32>, Vec<String>)> {
+    let im = read_image(png_path)?;
+    let p = im
+        .planes
+        .iter()
+        .find(|(n, _)| n == "y")
+        .map(|(_, p)| p)
+        .ok_or_else(|| Error::io(png_path, "label map must be a grey PNG"))?;
+    let text = std::fs::read_to_string(names_path).map_err(|e| Error::io(names_path, e))?;
+    let names: Vec<String> = text.lines().map(|l| l.trim().to_string()).collect();
+    let mut labels = Vec::with_capacity(p.data.len());
+    for (i, &v) in p.data.iter().enumerate() {
+        let k = v as usize;
+        labels.push(if k == 0 {
+            crate::scene::NO_OBJECT
+        } else if k <= names.len() {
+            (k - 1) as u32
+        } else {
+            return Err(Error::io(
+                png_path,
+                format!(
+                    "pixel ({}, {}) has label {k} but {} names only {}",
+                    i % p.width,
+                    i / p.width,
+                    names_path.display(),
+                    names.len()
+                ),
+            ));
+        });
+    }
+    Ok((p.width, p.height, labels, names))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -593,43 +632,4 @@ mod tests {
         assert!((l.get(2, 1) - (0.2126 * 2.0 + 0.7152 + 0.0722)).abs() < 1e-6);
         assert_eq!(im.plane_for("r").unwrap().get(2, 0), 2.0);
     }
-}
-
-/// Object labels for a captured image: a grey PNG whose value k > 0 marks
-/// object k and a text file whose k-th line (1-based) names it; value 0 is
-/// "no object". Returns per-pixel label ids (k − 1, or `scene::NO_OBJECT`) and names.
-pub fn read_label_map(
-    png_path: &Path,
-    names_path: &Path,
-) -> Result<(usize, usize, Vec<u32>, Vec<String>)> {
-    let im = read_image(png_path)?;
-    let p = im
-        .planes
-        .iter()
-        .find(|(n, _)| n == "y")
-        .map(|(_, p)| p)
-        .ok_or_else(|| Error::io(png_path, "label map must be a grey PNG"))?;
-    let text = std::fs::read_to_string(names_path).map_err(|e| Error::io(names_path, e))?;
-    let names: Vec<String> = text.lines().map(|l| l.trim().to_string()).collect();
-    let mut labels = Vec::with_capacity(p.data.len());
-    for (i, &v) in p.data.iter().enumerate() {
-        let k = v as usize;
-        labels.push(if k == 0 {
-            crate::scene::NO_OBJECT
-        } else if k <= names.len() {
-            (k - 1) as u32
-        } else {
-            return Err(Error::io(
-                png_path,
-                format!(
-                    "pixel ({}, {}) has label {k} but {} names only {}",
-                    i % p.width,
-                    i / p.width,
-                    names_path.display(),
-                    names.len()
-                ),
-            ));
-        });
-    }
-    Ok((p.width, p.height, labels, names))
 }

@@ -157,6 +157,17 @@ pub fn patch_means(
     Ok(out)
 }
 
+/// Patch means of `chart` in a sensor image (black level subtracted, DV).
+pub fn patch_means_of_sensor(
+    img: &crate::image::SensorImage,
+    chart: &str,
+    erode_fraction: f64,
+) -> Result<Vec<Patch>> {
+    let plane = super::plane::Plane::from_sensor(img)?;
+    let views = super::plane::channel_views(&plane, "y");
+    patch_means(&views, &img.labels, &img.label_names, chart, erode_fraction)
+}
+
 /// Figures `patchNN/<ch>_mean` (DV) and one curve per channel (mean vs patch number).
 pub fn measured(patches: &[Patch], measurement: &str) -> Measured {
     let mut m = Measured::default();

@@ -83,6 +83,16 @@ pub struct Region {
     pub rmse_poly: f64,
 }
 
+impl NoiseOptions {
+    /// Defaults with the sensor image's conversion gain.
+    pub fn for_sensor(img: &crate::image::SensorImage) -> Self {
+        Self {
+            conversion_gain_dv_per_e: img.conversion_gain_dv_per_e,
+            ..Default::default()
+        }
+    }
+}
+
 /// Classify one region (pixels of the channel inside `rect`).
 pub fn classify(
     plane: &Plane,
@@ -180,7 +190,7 @@ pub fn uniform_regions(plane: &Plane, opts: &NoiseOptions) -> Result<Vec<Region>
             plane.width, plane.height
         )));
     }
-    if !(opts.conversion_gain_dv_per_e > 0.0) {
+    if opts.conversion_gain_dv_per_e.is_nan() || opts.conversion_gain_dv_per_e <= 0.0 {
         return Err(Error::invalid("conversion gain must be > 0 DV/e-"));
     }
     let mut rng = SplitMix64(opts.seed);

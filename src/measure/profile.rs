@@ -37,6 +37,28 @@ impl Default for ProfileOptions {
     }
 }
 
+/// Profiles through `objects` of a sensor image (black level subtracted, DV;
+/// samples grouped per CFA tile column).
+pub fn profile_of_sensor(
+    img: &crate::image::SensorImage,
+    objects: &[String],
+    opts: &ProfileOptions,
+    measurement: &str,
+) -> Result<Measured> {
+    let plane = super::plane::Plane::from_sensor(img)?;
+    let views = super::plane::channel_views(&plane, "y");
+    let mut o = opts.clone();
+    o.step_px = img.cfa.width.max(1) as usize;
+    profile(
+        &views,
+        &img.labels,
+        &img.label_names,
+        objects,
+        &o,
+        measurement,
+    )
+}
+
 /// Profiles through `objects` (names in `label_names`; `labels` per pixel, row-major).
 pub fn profile(
     views: &[ChannelView],

@@ -36,6 +36,20 @@ impl Default for RiOptions {
     }
 }
 
+impl RiOptions {
+    /// Defaults for a sensor image: centre at the full-frame centre, its pitch.
+    pub fn for_sensor(img: &crate::image::SensorImage) -> Self {
+        Self {
+            center_px: Some((
+                img.full_width as f64 / 2.0 - img.window.x as f64,
+                img.full_height as f64 / 2.0 - img.window.y as f64,
+            )),
+            pixel_pitch_m: Some(img.pixel_pitch_m).filter(|p| *p > 0.0),
+            ..Default::default()
+        }
+    }
+}
+
 /// RI curve (field height in mm when the pitch is known, else px) and figures
 /// `ri@max` (outermost annulus) and `ri@half` (annulus holding half the maximum field height).
 pub fn relative_illumination(
@@ -74,7 +88,7 @@ pub fn relative_illumination(
         }
     }
     let m0 = mean(&bins[0]);
-    if bins[0].len() < 2 || !(m0 > 0.0) {
+    if bins[0].len() < 2 || m0.is_nan() || m0 <= 0.0 {
         return Err(Error::invalid(
             "flat field: the central annulus is empty or not brighter than the black level",
         ));
