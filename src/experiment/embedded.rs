@@ -20,6 +20,7 @@ macro_rules! embed {
 /// (file name inside `experiments/`, contents)
 pub const EXPERIMENTS: &[(&str, &str)] = &[
     embed!("cornell-box.kdl"),
+    embed!("e2e-quick.kdl"),
     embed!("fig07-lsf-mtf.kdl"),
     embed!("smoke.kdl"),
 ];

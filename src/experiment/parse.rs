@@ -486,6 +486,7 @@ impl P {
             description: None,
             bases: Vec::new(),
             scene: None,
+            scene_materials: None,
             additions: Vec::new(),
             removals: Vec::new(),
             overrides: Vec::new(),
@@ -566,7 +567,7 @@ impl P {
                 }
                 "scene" => {
                     self.no_children(file, n)?;
-                    let (w, vs) = self.single_string(file, n, "scene file")?;
+                    let (w, vs) = self.scene_node(file, n, &mut spec.scene_materials)?;
                     let ext = Path::new(&w)
                         .extension()
                         .and_then(|e| e.to_str())
@@ -853,6 +854,48 @@ impl P {
             ),
         )
         .with_help_opt(help)
+    }
+
+    /// `scene "file" [materials="paper"|"file"]`.
+    fn scene_node(
+        &self,
+        file: usize,
+        n: &KdlNode,
+        materials: &mut Option<String>,
+    ) -> Result<(String, Span), Located> {
+        let ents = self.entries(file, n)?;
+        let sp = self.node_span(file, n);
+        let mut positional = vec![];
+        for e in &ents {
+            match &e.name {
+                Some((k, s)) if k == "materials" => match &e.value {
+                    Value::String(v) if v == "paper" || v == "file" => {
+                        *materials = (v == "paper").then(|| v.clone());
+                    }
+                    v => {
+                        return Err(self
+                            .e(e.vspan, format!("materials: expected \"paper\" or \"file\", found {}", apply::describe(v)))
+                            .with_help("materials=\"paper\" applies the paper's measured spectra"));
+                    }
+                },
+                Some((k, s)) => {
+                    return Err(self
+                        .e(*s, format!("unexpected property '{k}' on 'scene'"))
+                        .with_help_opt(
+                            crate::diag::did_you_mean(k, ["materials"]).map(|m| format!("did you mean '{m}'?")),
+                        ));
+                }
+                None => positional.push(e),
+            }
+        }
+        match positional.as_slice() {
+            [e] => match &e.value {
+                Value::String(s) => Ok((s.clone(), e.vspan)),
+                v => Err(self.e(e.vspan, format!("scene file: expected a string, found {}", apply::describe(v)))),
+            },
+            [] => Err(self.e(sp, "'scene' needs the scene file").with_help("write scene \"….pbrt\"")),
+            [_, e, ..] => Err(self.e(e.vspan, "'scene' takes one file")),
+        }
     }
 
     fn single_string(

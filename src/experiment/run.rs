@@ -95,8 +95,19 @@ fn kill_self() -> ! {
     std::process::abort()
 }
 
+/// What one variant produced.
+#[derive(Default)]
+pub struct VariantOutput {
+    pub figures: Vec<Figure>,
+    pub render_s: f64,
+    /// (measurement name, curves) for `curves/<variant>/<measurement>.csv`.
+    pub curves: Vec<(String, Vec<crate::measure::Curve>)>,
+    /// Preview images: (file name, PNG bytes, ROI overlay JSON).
+    pub previews: Vec<(String, Vec<u8>, String)>,
+}
+
 /// Run the figures of one variant.
-pub fn run_variant(v: &PlannedVariant) -> Result<(Vec<Figure>, f64)> {
+pub fn run_variant(v: &PlannedVariant) -> Result<VariantOutput> {
     let spec = &v.variant.spec;
     let need = spec.measures.iter().fold(stages::Needs::default(), |a, m| {
         let n = stages::needs(&m.kind);
@@ -105,7 +116,7 @@ pub fn run_variant(v: &PlannedVariant) -> Result<(Vec<Figure>, f64)> {
             sensor_image: a.sensor_image || n.sensor_image,
         }
     });
-    let mut render_s = 0.0;
+    let mut out = VariantOutput::default();
     let mut oi = None;
     let mut si = None;
     if need.optical_image {
@@ -113,26 +124,49 @@ pub fn run_variant(v: &PlannedVariant) -> Result<(Vec<Figure>, f64)> {
         let camera = stages::build_camera(spec, &scene)?;
         let t = Instant::now();
         oi = Some(stages::render(spec, &scene, camera.as_ref())?);
-        render_s = t.elapsed().as_secs_f64();
+        out.render_s = t.elapsed().as_secs_f64();
+    }
+    if let Some(o) = &oi {
+        let tmp = tempfile::tempdir().map_err(|e| Error::invalid(format!("temp dir: {e}")))?;
+        let p = tmp.path().join("oi.png");
+        crate::render::output::write_png_preview(&p, o)?;
+        let bytes = std::fs::read(&p).map_err(|e| Error::io(&p, e))?;
+        out.previews.push(("optical-image.png".into(), bytes, String::new()));
     }
     if need.sensor_image
         && let Some(o) = &oi
     {
-        si = Some(stages::simulate_sensor(spec, o)?);
+        let s = stages::simulate_sensor(spec, o)?;
+        let neutral = vec![1.0; s.cfa.channels.len()];
+        out.previews.push(("sensor.png".into(), crate::sensor::output::preview_png_bytes(&s, &neutral)?, String::new()));
+        si = Some(s);
     }
-    let mut figures = Vec::new();
+    let mut rois = vec![];
     for m in &spec.measures {
-        for f in stages::measure(m, spec, oi.as_ref(), si.as_ref())? {
+        let r = stages::measure(m, spec, oi.as_ref(), si.as_ref())?;
+        for f in &r.figures {
             if !f.value.is_finite() || !f.stderr.is_finite() {
                 return Err(Error::invalid(format!(
                     "measurement '{}' produced a non-finite {} ({} ± {}); not written",
                     m.name, f.quantity, f.value, f.stderr
                 )));
             }
-            figures.push(f);
+        }
+        for p in &r.pixels_read {
+            rois.push(serde_json::json!({"x": p.x, "y": p.y, "w": p.w, "h": p.h, "label": m.name}));
+        }
+        out.figures.extend(r.figures);
+        if !r.curves.is_empty() {
+            out.curves.push((m.name.clone(), r.curves));
         }
     }
-    Ok((figures, render_s))
+    let rois = serde_json::to_string(&rois).unwrap_or_else(|_| "[]".into());
+    for p in &mut out.previews {
+        if p.0 == "sensor.png" {
+            p.2 = rois.clone();
+        }
+    }
+    Ok(out)
 }
 
 /// Run one planned experiment.
@@ -167,14 +201,27 @@ pub fn run_plan(plan: &Plan, opts: &RunOptions, progress: &mut dyn Progress) -> 
         } else {
             let t = Instant::now();
             match run_variant(v) {
-                Ok((figs, render_s)) => {
+                Ok(vo) => {
+                    let (figs, render_s) = (&vo.figures, vo.render_s);
+                    // Curves and previews first: a variant CSV on disk means its
+                    // side files are complete.
+                    for (name, curves) in &vo.curves {
+                        crate::report::results::write_curves(&dir.root, &v.variant.id, name, curves)?;
+                    }
+                    for (name, png, rois) in &vo.previews {
+                        let p = dir.root.join("previews").join(&v.variant.id).join(name);
+                        crate::diag::write_atomic(&p, png)?;
+                        if !rois.is_empty() {
+                            crate::diag::write_atomic(&p.with_extension("rois.json"), rois.as_bytes())?;
+                        }
+                    }
                     let total_s = t.elapsed().as_secs_f64();
                     let csv = variant_csv(
                         &plan.experiment,
                         &v.variant.id,
                         &plan.axes,
                         &v.variant.params,
-                        &figs,
+                        figs,
                         render_s,
                         total_s,
                     );
@@ -232,6 +279,14 @@ pub fn run_plan(plan: &Plan, opts: &RunOptions, progress: &mut dyn Progress) -> 
         None => {
             crate::diag::write_atomic(&dir.results(), csv.as_bytes())?;
             manifest.write(&dir.manifest())?;
+        }
+    }
+    if dir.results().exists() {
+        if let Err(e) = crate::report::html::write_report(&dir.root) {
+            eprintln!("warning: report for '{}' not written: {e}", plan.experiment);
+        }
+        if let Err(e) = crate::report::html::write_index(&opts.out) {
+            eprintln!("warning: results index not written: {e}");
         }
     }
     progress.finish(&plan.experiment);

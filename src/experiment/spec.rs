@@ -178,6 +178,10 @@ pub struct ResolvedExperiment {
     /// Base setups included, outermost first.
     pub bases: Vec<PathBuf>,
     pub scene: Option<FileRef>,
+    /// `scene "…" materials="paper"`: replace the pbrt scene's placeholder
+    /// materials by the paper's measured spectra (Cornell box walls, lamp).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scene_materials: Option<String>,
     pub additions: Vec<Addition>,
     pub removals: Vec<String>,
     pub overrides: Vec<Override>,
