@@ -46,6 +46,8 @@ enum Command {
     Diff(cli::report::DiffArgs),
     /// Write report.html for a results directory (and index.html for a results root).
     Report(cli::report::ReportArgs),
+    /// Export a scene to POV-Ray (geometry sanity image); render it with --png.
+    Pov(cli::pov::PovArgs),
 }
 
 fn main() {
@@ -70,6 +72,7 @@ fn main() {
         Command::Measure(c) => cli::measure::run(c),
         Command::Diff(a) => cli::report::diff(a),
         Command::Report(a) => cli::report::report(a),
+        Command::Pov(a) => cli::pov::pov(a),
     };
     match result {
         Ok(code) => std::process::exit(code),

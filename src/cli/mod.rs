@@ -4,6 +4,7 @@
 pub mod experiment;
 pub mod lens;
 pub mod measure;
+pub mod pov;
 pub mod render;
 pub mod report;
 pub mod scene;

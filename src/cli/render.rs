@@ -135,6 +135,10 @@ pub fn bench(a: BenchArgs) -> Result<i32> {
             Ok(0)
         }
         "parse" => super::scene::bench_parse(),
+        "sensor" => {
+            println!("{}", camsim::sensor::bench_sensor()?);
+            Ok(0)
+        }
         other => Err(Error::NotSupported(format!(
             "bench '{other}' (available: render, parse, sensor)"
         ))),
