@@ -125,19 +125,16 @@ fn seeds() -> Vec<String> {
     };
     let mut v: Vec<String> = experiment::embedded::EXPERIMENTS
         .iter()
-        .filter(|(n, _)| *n != "fig07-lsf-mtf.kdl")
+        .filter(|(_, t)| !t.contains("base \""))
         .map(|(_, t)| compact(t))
         .collect();
     v.push(compact(
         &std::fs::read_to_string("tests/experiments/grid12.kdl").unwrap(),
     ));
-    // fig07 with a small base next to it.
-    let fig07 = experiment::embedded::EXPERIMENTS
-        .iter()
-        .find(|(n, _)| *n == "fig07-lsf-mtf.kdl")
-        .unwrap()
-        .1;
-    v.push(compact(fig07).replace("cornell-box.kdl", "small-setup.kdl"));
+    // Experiments with a base get a small base next to the fuzz file instead.
+    for (_, t) in experiment::embedded::EXPERIMENTS.iter().filter(|(_, t)| t.contains("base \"")) {
+        v.push(compact(t).replace("cornell-box.kdl", "small-setup.kdl"));
+    }
     v.push(
         r#"experiment "e" {
     add "e" target="slanted-edge" position-m=(0 0.1 0) rotate-deg=(0 0 5) scale=2 tilt-deg=5
