@@ -13,6 +13,7 @@ pub mod measure;
 pub mod optical_image;
 pub mod optics;
 pub mod params;
+pub mod pov;
 pub mod render;
 pub mod report;
 pub mod scene;
