@@ -197,7 +197,10 @@ pub fn run(spp: u32, ref_spp: u32, threads: usize) -> Result<String> {
         let world = World::build(&scene, &settings.grid, kind)?;
         let cpu0 = cpu_time_s();
         let img = render_world(&world, &cam, &to_world, &film, &settings, names.clone())?;
-        let cpu = cpu_time_s().zip(cpu0).map(|(b, a)| b - a).unwrap_or(f64::NAN);
+        let cpu = cpu_time_s()
+            .zip(cpu0)
+            .map(|(b, a)| b - a)
+            .unwrap_or(f64::NAN);
         let paths = film.width_px as f64 * film.height_px as f64 * spp as f64;
         out += &format!(
             "  {kind:?}: {spp} spp in {:.3} s = {:.3} M paths/s wall; {:.2} CPU s = {:.3} M paths per CPU-second ({} non-finite)\n",
