@@ -697,3 +697,30 @@ fn hero_wavelength_camera_is_unbiased_in_the_furnace() {
     eprintln!("hero camera furnace: band-mean L/Le = {mean:.5} (expected 2)");
     assert!((mean / 2.0 - 1.0).abs() < 0.02, "band-mean L/Le = {mean}");
 }
+
+#[test]
+fn bad_render_inputs_are_errors_not_panics() {
+    let (mut scene, film) = small_box_scene(1.0);
+    let cam = Pinhole::new(70.0, 2.0, &film).unwrap();
+    let mut s = settings(0, 6);
+    assert!(render(&scene, &cam, &film, &s).is_err(), "spp 0");
+    s.spp = 1;
+    s.roi = Some(Rect::new(20, 0, 10, 5));
+    assert!(
+        render(&scene, &cam, &film, &s).is_err(),
+        "ROI outside the film"
+    );
+    s.roi = None;
+    let bad_film = FilmSpec {
+        width_px: 0,
+        ..film.clone()
+    };
+    assert!(render(&scene, &cam, &bad_film, &s).is_err(), "empty film");
+    scene.meshes[0].material = 99;
+    let e = render(&scene, &cam, &film, &s).unwrap_err().to_string();
+    assert!(e.contains("walls") && e.contains("material 99"), "{e}");
+    let (mut scene, _) = small_box_scene(1.0);
+    scene.meshes[0].positions[0].x = f32::NAN;
+    let e = render(&scene, &cam, &film, &s).unwrap_err().to_string();
+    assert!(e.contains("walls") && e.contains("not finite"), "{e}");
+}

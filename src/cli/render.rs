@@ -36,6 +36,9 @@ pub struct BenchArgs {
     pub ref_spp: u32,
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
+    /// Wavelength bands carried per path (400–700 nm).
+    #[arg(long, default_value_t = 31)]
+    pub bands: usize,
 }
 
 fn parse_roi(s: &str) -> Result<Rect> {
@@ -130,7 +133,7 @@ pub fn render(a: RenderArgs) -> Result<i32> {
 pub fn bench(a: BenchArgs) -> Result<i32> {
     match a.which.as_str() {
         "render" => {
-            let r = camsim::render::bench::run(a.spp, a.ref_spp, a.threads)?;
+            let r = camsim::render::bench::run(a.spp, a.ref_spp, a.threads, a.bands)?;
             println!("{r}");
             Ok(0)
         }

@@ -172,7 +172,7 @@ fn cpu_time_s() -> Option<f64> {
 }
 
 /// Run the benchmark and return a printable report.
-pub fn run(spp: u32, ref_spp: u32, threads: usize) -> Result<String> {
+pub fn run(spp: u32, ref_spp: u32, threads: usize, bands: usize) -> Result<String> {
     let (scene, film) = mitsuba_cornell_box();
     let cam = Pinhole::new(39.3077, 1.0, &film)?;
     let to_world = scene
@@ -186,6 +186,15 @@ pub fn run(spp: u32, ref_spp: u32, threads: usize) -> Result<String> {
         max_bounces: 6,
         threads,
         seed: 1,
+        grid: crate::spectrum::WavelengthGrid {
+            start_nm: 400.0,
+            step_nm: if bands > 1 {
+                300.0 / (bands - 1) as f64
+            } else {
+                10.0
+            },
+            count: bands.max(1),
+        },
         ..Default::default()
     };
     let mut out = format!(
@@ -197,7 +206,10 @@ pub fn run(spp: u32, ref_spp: u32, threads: usize) -> Result<String> {
         let world = World::build(&scene, &settings.grid, kind)?;
         let cpu0 = cpu_time_s();
         let img = render_world(&world, &cam, &to_world, &film, &settings, names.clone())?;
-        let cpu = cpu_time_s().zip(cpu0).map(|(b, a)| b - a).unwrap_or(f64::NAN);
+        let cpu = cpu_time_s()
+            .zip(cpu0)
+            .map(|(b, a)| b - a)
+            .unwrap_or(f64::NAN);
         let paths = film.width_px as f64 * film.height_px as f64 * spp as f64;
         out += &format!(
             "  {kind:?}: {spp} spp in {:.3} s = {:.3} M paths/s wall; {:.2} CPU s = {:.3} M paths per CPU-second ({} non-finite)\n",

@@ -80,7 +80,7 @@ pub fn write_exr(path: &Path, img: &OpticalImage) -> Result<()> {
     let layer = Layer::new(
         (w, h),
         LayerAttributes::default(),
-        Encoding::SMALL_LOSSLESS,
+        Encoding::FAST_LOSSLESS,
         AnyChannels::sort(list),
     );
     let image = Image::from_layer(layer);
