@@ -37,9 +37,19 @@ impl PixelRng {
     /// The stream for `item` (e.g. full-frame pixel index) of `source` under `seed`.
     #[inline]
     pub fn new(seed: u64, source: u64, item: u64) -> Self {
-        let k = mix64(seed.wrapping_add(GAMMA.wrapping_mul(source.wrapping_add(1))));
-        let k = mix64(k ^ item.wrapping_mul(0xd1b5_4a32_d192_ed03));
-        Self { state: k }
+        Self::keyed(Self::stream_key(seed, source), item)
+    }
+    /// The per-(seed, source) half of the key, to hoist out of per-pixel loops:
+    /// `keyed(stream_key(s, src), i)` equals `new(s, src, i)`.
+    #[inline]
+    pub fn stream_key(seed: u64, source: u64) -> u64 {
+        mix64(seed.wrapping_add(GAMMA.wrapping_mul(source.wrapping_add(1))))
+    }
+    #[inline]
+    pub fn keyed(stream_key: u64, item: u64) -> Self {
+        Self {
+            state: mix64(stream_key ^ item.wrapping_mul(0xd1b5_4a32_d192_ed03)),
+        }
     }
     #[inline]
     pub fn next_u64(&mut self) -> u64 {
@@ -350,6 +360,9 @@ mod tests {
             .collect();
         assert_eq!(a, b);
         assert!(a.iter().zip(&c).all(|(x, y)| x != y));
+        let k = PixelRng::stream_key(1, stream::PHOTON);
+        let d: Vec<u64> = (0..4).map(|i| PixelRng::keyed(k, i).next_u64()).collect();
+        assert_eq!(a, d);
         assert!(PixelRng::new(0, 0, 0).poisson(f64::NAN) == 0.0);
         assert!(PixelRng::new(0, 0, 0).poisson(-1.0) == 0.0);
         assert!(PixelRng::new(0, 0, 0).poisson(f64::INFINITY).is_infinite());
