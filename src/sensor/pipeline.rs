@@ -522,7 +522,7 @@ fn noise_pass(
             }
             let mut d = v * dv_per_v + black;
             if src.quantization {
-                d = d.round();
+                d = super::rng::fast_round(d);
             }
             if src.clipping {
                 d = d.clamp(0.0, white);
