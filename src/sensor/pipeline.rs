@@ -411,7 +411,7 @@ pub fn fpn_pixel(cfg: &SensorConfig, gi: u64) -> (f64, f64) {
     )
 }
 
-#[inline]
+#[inline(always)]
 fn fpn_pixel_keyed(cfg: &SensorConfig, key: u64, gi: u64) -> (f64, f64) {
     let mut r = PixelRng::keyed(key, gi);
     let n1 = r.normal();
