@@ -510,14 +510,15 @@ fn noise_pass(
                 v = v * cgn + coff;
             }
             if use_read || use_reset {
+                // read noise is the stream's first normal, reset noise its second,
+                // so switching one off leaves the other's values unchanged
                 let mut rr = PixelRng::keyed(k_read, gi);
                 let n1 = rr.normal();
-                let n2 = rr.normal();
                 if use_read {
                     v += cfg.read_noise_v * n1;
                 }
                 if use_reset {
-                    v += cfg.reset_noise_v * n2;
+                    v += cfg.reset_noise_v * rr.normal();
                 }
             }
             let mut d = v * dv_per_v + black;
