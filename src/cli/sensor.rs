@@ -90,10 +90,11 @@ fn simulate(a: SimulateArgs) -> Result<i32> {
         height,
         dng: a.dng,
     };
-    let files = write_flat_sequence(&cfg, &o, &a.out)?;
+    write_flat_sequence(&cfg, &o, &a.out)?;
     eprintln!(
-        "wrote {} frames and settings.csv to {}",
-        files.len() - 1,
+        "wrote {} frames{} and settings.csv to {}",
+        o.frames,
+        if o.dng { " (PNG and DNG)" } else { "" },
         a.out.display()
     );
     Ok(0)
@@ -101,6 +102,14 @@ fn simulate(a: SimulateArgs) -> Result<i32> {
 
 fn calibrate(a: CalibrateArgs) -> Result<i32> {
     let seqs = read_flat_sequences(&a.dir, &a.channel)?;
+    for (d, s) in &seqs {
+        if s.frames.len() < 2 {
+            return Err(Error::io(
+                d,
+                "a sequence needs at least 2 frames (temporal noise comes from frame pairs)",
+            ));
+        }
+    }
     let only: Vec<_> = seqs.iter().map(|(_, s)| s.clone()).collect();
     let pt =
         photon_transfer(&only).map_err(|m| Error::invalid(format!("{}: {m}", a.dir.display())))?;

@@ -56,6 +56,14 @@ impl std::fmt::Display for SensorBench {
             "sensor,simulate_time_best_of_{},s,{:.4}",
             self.runs, self.simulate_s
         )?;
+        if let Some(c) = self.simulate_cpu_s {
+            writeln!(f, "sensor,simulate_cpu_time,s,{c:.3}")?;
+            writeln!(
+                f,
+                "sensor,unloaded_wall_estimate_cpu_over_threads,s,{:.3}",
+                c / self.threads.max(1) as f64
+            )?;
+        }
         match self.peak_memory_bytes {
             Some(b) => writeln!(
                 f,

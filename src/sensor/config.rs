@@ -225,6 +225,16 @@ pub const SCALAR_NAMES: &[&str] = &[
 /// Block node names (files only).
 pub const BLOCK_NAMES: &[&str] = &["qe", "qe-matrix", "relative-illumination"];
 
+/// Reset (kTC) noise of a sense node, volts: √(k_B·T / C) with C = q / conversion gain.
+/// Without correlated double sampling this is the `reset-noise-mv` to use (e.g. 1.41 mV
+/// for 76.5 µV/e⁻ at 300 K, ≈ 18 e⁻); with CDS, as in the IMX363, it cancels (0).
+pub fn ktc_noise_v(conversion_gain_v_per_e: f64, temperature_k: f64) -> f64 {
+    const K_B: f64 = 1.380_649e-23;
+    const Q: f64 = 1.602_176_634e-19;
+    let c = Q / conversion_gain_v_per_e;
+    (K_B * temperature_k / c).sqrt()
+}
+
 /// ISO at which the analog gain is 1 (ISETCam's IMX363: analog gain = 55/ISO in its
 /// inverse convention, i.e. our multiplicative gain = ISO/55).
 pub const UNITY_GAIN_ISO: f64 = 55.0;
@@ -1194,6 +1204,13 @@ mod tests {
         p.set("exposure-sec", Value::Number(0.2));
         let e = c.apply_overrides(&p).unwrap_err();
         assert!(e.contains("did you mean 'exposure-s'"), "{e}");
+    }
+
+    #[test]
+    fn ktc_noise_by_hand() {
+        // C = 1.602e-19 / 76.5e-6 = 2.094 fF; √(1.381e-23·300 / 2.094e-15) = 1.406 mV
+        let v = ktc_noise_v(76.5e-6, 300.0);
+        assert!((v - 1.406e-3).abs() < 0.002e-3, "{v}");
     }
 
     #[test]

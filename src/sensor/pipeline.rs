@@ -404,7 +404,16 @@ pub fn resolve_exposure_s(cfg: &SensorConfig, rate_e_per_s: &[f32]) -> Result<f6
 /// (before switches): (1 + σ_PRNU·n₁, σ_DSNU·n₂).
 #[inline]
 pub fn fpn_pixel(cfg: &SensorConfig, gi: u64) -> (f64, f64) {
-    let mut r = PixelRng::new(cfg.fpn_seed, stream::FPN_PIXEL, gi);
+    fpn_pixel_keyed(
+        cfg,
+        PixelRng::stream_key(cfg.fpn_seed, stream::FPN_PIXEL),
+        gi,
+    )
+}
+
+#[inline(always)]
+fn fpn_pixel_keyed(cfg: &SensorConfig, key: u64, gi: u64) -> (f64, f64) {
+    let mut r = PixelRng::keyed(key, gi);
     let n1 = r.normal();
     let n2 = r.normal();
     ((1.0 + cfg.prnu * n1).max(0.0), cfg.dsnu_v * n2)
@@ -461,6 +470,9 @@ fn noise_pass(
     let n = window.area() as usize;
     let ww = window.w as usize;
     let mut dv = vec![0f32; n];
+    let k_photon = PixelRng::stream_key(seed, stream::PHOTON);
+    let k_read = PixelRng::stream_key(seed, stream::READ);
+    let k_fpn = PixelRng::stream_key(cfg.fpn_seed, stream::FPN_PIXEL);
     let to_mean = |r: f32| (r as f64 * t + dark_e) as f32;
     let body = |r: usize,
                 mean_row: &[f32],
@@ -474,12 +486,12 @@ fn noise_pass(
             let gi = yf * full.0 as u64 + xf;
             let mu = mean_row[c] as f64;
             let mut e = if src.photon_noise {
-                PixelRng::new(seed, stream::PHOTON, gi).poisson(mu)
+                PixelRng::keyed(k_photon, gi).poisson(mu)
             } else {
                 mu
             };
             let (g, off) = if use_prnu || use_dsnu {
-                fpn_pixel(cfg, gi)
+                fpn_pixel_keyed(cfg, k_fpn, gi)
             } else {
                 (1.0, 0.0)
             };
@@ -498,19 +510,20 @@ fn noise_pass(
                 v = v * cgn + coff;
             }
             if use_read || use_reset {
-                let mut rr = PixelRng::new(seed, stream::READ, gi);
+                // read noise is the stream's first normal, reset noise its second,
+                // so switching one off leaves the other's values unchanged
+                let mut rr = PixelRng::keyed(k_read, gi);
                 let n1 = rr.normal();
-                let n2 = rr.normal();
                 if use_read {
                     v += cfg.read_noise_v * n1;
                 }
                 if use_reset {
-                    v += cfg.reset_noise_v * n2;
+                    v += cfg.reset_noise_v * rr.normal();
                 }
             }
             let mut d = v * dv_per_v + black;
             if src.quantization {
-                d = d.round();
+                d = super::rng::fast_round(d);
             }
             if src.clipping {
                 d = d.clamp(0.0, white);

@@ -37,9 +37,19 @@ impl PixelRng {
     /// The stream for `item` (e.g. full-frame pixel index) of `source` under `seed`.
     #[inline]
     pub fn new(seed: u64, source: u64, item: u64) -> Self {
-        let k = mix64(seed.wrapping_add(GAMMA.wrapping_mul(source.wrapping_add(1))));
-        let k = mix64(k ^ item.wrapping_mul(0xd1b5_4a32_d192_ed03));
-        Self { state: k }
+        Self::keyed(Self::stream_key(seed, source), item)
+    }
+    /// The per-(seed, source) half of the key, to hoist out of per-pixel loops:
+    /// `keyed(stream_key(s, src), i)` equals `new(s, src, i)`.
+    #[inline]
+    pub fn stream_key(seed: u64, source: u64) -> u64 {
+        mix64(seed.wrapping_add(GAMMA.wrapping_mul(source.wrapping_add(1))))
+    }
+    #[inline]
+    pub fn keyed(stream_key: u64, item: u64) -> Self {
+        Self {
+            state: mix64(stream_key ^ item.wrapping_mul(0xd1b5_4a32_d192_ed03)),
+        }
     }
     #[inline]
     pub fn next_u64(&mut self) -> u64 {
@@ -57,18 +67,26 @@ impl PixelRng {
         ((self.next_u64() >> 11) + 1) as f64 * (1.0 / (1u64 << 53) as f64)
     }
     /// Standard normal, exact, by the ziggurat method (Marsaglia & Tsang 2000;
-    /// 256 layers, f64, the layer index and the abscissa from disjoint bits).
-    #[inline]
+    /// 256 layers, f64, the layer index and the abscissa from disjoint bits). The
+    /// common case (≈ 99 %: inside a layer's rectangle) is inlined; wedges and the
+    /// tail go to a cold path.
+    #[inline(always)]
     pub fn normal(&mut self) -> f64 {
         let z = ziggurat();
+        let bits = self.next_u64();
+        let i = (bits & 0xff) as usize;
+        let u = 2.0 * ((bits >> 11) as f64 * (1.0 / (1u64 << 53) as f64)) - 1.0;
+        let x = u * z.x[i];
+        if x.abs() < z.x[i + 1] {
+            return x;
+        }
+        self.normal_slow(z, i, u, x)
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn normal_slow(&mut self, z: &Ziggurat, mut i: usize, mut u: f64, mut x: f64) -> f64 {
         loop {
-            let bits = self.next_u64();
-            let i = (bits & 0xff) as usize;
-            let u = 2.0 * ((bits >> 11) as f64 * (1.0 / (1u64 << 53) as f64)) - 1.0;
-            let x = u * z.x[i];
-            if x.abs() < z.x[i + 1] {
-                return x;
-            }
             if i == 0 {
                 // tail beyond R (Marsaglia 1964)
                 loop {
@@ -83,11 +101,19 @@ impl PixelRng {
             if y < (-0.5 * x * x).exp() {
                 return x;
             }
+            let bits = self.next_u64();
+            i = (bits & 0xff) as usize;
+            u = 2.0 * ((bits >> 11) as f64 * (1.0 / (1u64 << 53) as f64)) - 1.0;
+            x = u * z.x[i];
+            if x.abs() < z.x[i + 1] {
+                return x;
+            }
         }
     }
+
     /// Exact Poisson variate with mean `mu` (NaN or ≤ 0 gives 0; +∞ gives +∞, which
     /// the pipeline's well clipping then bounds).
-    #[inline]
+    #[inline(always)]
     pub fn poisson(&mut self, mu: f64) -> f64 {
         if mu.is_nan() || mu <= 0.0 {
             return 0.0;
@@ -120,6 +146,7 @@ impl PixelRng {
     }
     /// Hörmann (1993), "The transformed rejection method for generating Poisson
     /// random variables", algorithm PTRS; exact for μ ≥ 10.
+    #[inline(always)]
     fn poisson_ptrs(&mut self, mu: f64) -> f64 {
         let smu = mu.sqrt();
         let b = 0.931 + 2.53 * smu;
@@ -128,25 +155,46 @@ impl PixelRng {
         // for μ ≥ 10) to keep a division off the common path.
         let bm2 = b - 2.0;
         let v_r_num = 0.9277 * bm2 - 3.6224;
-        let mut log_mu = f64::NAN; // computed on the first slow-path test only
+        let u = self.uniform() - 0.5;
+        let v = self.uniform();
+        let us = 0.5 - u.abs();
+        let k = fast_floor((2.0 * a / us + b) * u + mu + 0.43);
+        if us >= 0.07 && v * bm2 <= v_r_num {
+            return k;
+        }
+        self.poisson_ptrs_slow(mu, a, b, bm2, v_r_num, us, v, k)
+    }
+
+    /// The rest of PTRS after a failed fast acceptance (same random sequence).
+    #[cold]
+    #[inline(never)]
+    #[allow(clippy::too_many_arguments)]
+    fn poisson_ptrs_slow(
+        &mut self,
+        mu: f64,
+        a: f64,
+        b: f64,
+        bm2: f64,
+        v_r_num: f64,
+        mut us: f64,
+        mut v: f64,
+        mut k: f64,
+    ) -> f64 {
+        let log_mu = mu.ln();
+        let inv_alpha = 1.1239 + 1.1328 / (b - 3.4);
         loop {
+            if !(k < 0.0 || (us < 0.013 && v > us)) {
+                let lhs = (v * inv_alpha / (a / (us * us) + b)).ln();
+                let rhs = -mu + k * log_mu - ln_factorial(k);
+                if lhs <= rhs {
+                    return k;
+                }
+            }
             let u = self.uniform() - 0.5;
-            let v = self.uniform();
-            let us = 0.5 - u.abs();
-            let k = ((2.0 * a / us + b) * u + mu + 0.43).floor();
+            v = self.uniform();
+            us = 0.5 - u.abs();
+            k = fast_floor((2.0 * a / us + b) * u + mu + 0.43);
             if us >= 0.07 && v * bm2 <= v_r_num {
-                return k;
-            }
-            if k < 0.0 || (us < 0.013 && v > us) {
-                continue;
-            }
-            if log_mu.is_nan() {
-                log_mu = mu.ln();
-            }
-            let inv_alpha = 1.1239 + 1.1328 / (b - 3.4);
-            let lhs = (v * inv_alpha / (a / (us * us) + b)).ln();
-            let rhs = -mu + k * log_mu - ln_factorial(k);
-            if lhs <= rhs {
                 return k;
             }
         }
@@ -159,25 +207,56 @@ const ZIG_V: f64 = 0.004_928_673_233_99;
 
 struct Ziggurat {
     /// Layer widths x[0] (base: V/f(R)) > x[1] = R > … > x[256] = 0.
-    x: Vec<f64>,
+    x: [f64; ZIG_N + 1],
     /// f(x[i]) = exp(−x[i]²/2).
-    f: Vec<f64>,
+    f: [f64; ZIG_N + 1],
 }
 
 fn ziggurat() -> &'static Ziggurat {
     static Z: OnceLock<Ziggurat> = OnceLock::new();
     Z.get_or_init(|| {
         let f = |x: f64| (-0.5 * x * x).exp();
-        let mut x = vec![0.0; ZIG_N + 1];
+        let mut x = [0.0; ZIG_N + 1];
         x[0] = ZIG_V / f(ZIG_R);
         x[1] = ZIG_R;
         for i in 2..ZIG_N {
             x[i] = (-2.0 * (ZIG_V / x[i - 1] + f(x[i - 1])).ln()).sqrt();
         }
         x[ZIG_N] = 0.0;
-        let fx = x.iter().map(|&v| f(v)).collect();
+        let fx = x.map(f);
         Ziggurat { x, f: fx }
     })
+}
+
+/// floor(x) without a libm call on baseline x86-64 (no SSE4.1 `roundsd`): exact for
+/// |x| < 2^52, `f64::floor` otherwise.
+#[inline]
+pub fn fast_floor(x: f64) -> f64 {
+    if x.abs() < 4_503_599_627_370_496.0 {
+        let t = x as i64 as f64; // truncation toward zero, exact in this range
+        if t > x { t - 1.0 } else { t }
+    } else {
+        x.floor()
+    }
+}
+
+/// round(x), halves away from zero (as `f64::round`), without a libm call: exact for
+/// |x| < 2^52, `f64::round` otherwise.
+#[inline]
+pub fn fast_round(x: f64) -> f64 {
+    if x.abs() < 4_503_599_627_370_496.0 {
+        let t = x as i64 as f64;
+        let f = x - t; // exact: |x| < 2^52
+        if f >= 0.5 {
+            t + 1.0
+        } else if f <= -0.5 {
+            t - 1.0
+        } else {
+            t
+        }
+    } else {
+        x.round()
+    }
 }
 
 /// ln(k!) for integer-valued k ≥ 0: exact table below 256, Stirling series above
@@ -338,6 +417,40 @@ mod tests {
     }
 
     #[test]
+    fn fast_floor_and_round_match_libm() {
+        let mut r = PixelRng::new(3, 3, 3);
+        let specials = [
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.5,
+            -1.5,
+            2.5,
+            -2.5,
+            0.49999999999999994,
+            -0.49999999999999994,
+            1e15 + 0.5,
+            -1e15 - 0.5,
+            4.6e15,
+            -4.6e15,
+            1e300,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ];
+        for &x in specials.iter().chain(
+            (0..100_000)
+                .map(|_| (r.uniform() - 0.5) * 2e4)
+                .collect::<Vec<_>>()
+                .iter(),
+        ) {
+            assert_eq!(fast_floor(x), x.floor(), "floor {x}");
+            assert_eq!(fast_round(x), x.round(), "round {x}");
+        }
+        assert!(fast_floor(f64::NAN).is_nan() && fast_round(f64::NAN).is_nan());
+    }
+
+    #[test]
     fn streams_differ_and_repeat() {
         let a: Vec<u64> = (0..4)
             .map(|i| PixelRng::new(1, stream::PHOTON, i).next_u64())
@@ -350,6 +463,9 @@ mod tests {
             .collect();
         assert_eq!(a, b);
         assert!(a.iter().zip(&c).all(|(x, y)| x != y));
+        let k = PixelRng::stream_key(1, stream::PHOTON);
+        let d: Vec<u64> = (0..4).map(|i| PixelRng::keyed(k, i).next_u64()).collect();
+        assert_eq!(a, d);
         assert!(PixelRng::new(0, 0, 0).poisson(f64::NAN) == 0.0);
         assert!(PixelRng::new(0, 0, 0).poisson(-1.0) == 0.0);
         assert!(PixelRng::new(0, 0, 0).poisson(f64::INFINITY).is_infinite());
