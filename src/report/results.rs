@@ -251,6 +251,79 @@ pub fn read_curves(path: &Path) -> Result<Vec<Curve>> {
     Ok(out)
 }
 
+/// Rows for `results.csv` from a variant's measured figures.
+pub fn rows_from_figures(
+    experiment: &str,
+    variant: &str,
+    params: &[(String, String)],
+    figures: &[crate::figure::Figure],
+    render_s: f64,
+    total_s: f64,
+) -> Vec<ResultRow> {
+    figures
+        .iter()
+        .map(|f| ResultRow {
+            experiment: experiment.into(),
+            variant: variant.into(),
+            params: params.to_vec(),
+            measurement: f.measurement.clone(),
+            quantity: f.quantity.clone(),
+            unit: f.unit.clone(),
+            value: f.value,
+            stderr: f.stderr,
+            render_s,
+            total_s,
+        })
+        .collect()
+}
+
+/// Write `dir/previews/<variant>/<name>.png` (8-bit grey or RGB, `channels`
+/// 1 or 3, row-major) and, when `rois` is not empty, `<name>.rois.json`
+/// with the labelled rectangles (pixels of that image) the report overlays.
+pub fn write_preview(
+    dir: &Path,
+    variant: &str,
+    name: &str,
+    (w, h, channels): (u32, u32, usize),
+    pixels: &[u8],
+    rois: &[(String, crate::optical_image::Rect)],
+) -> Result<()> {
+    let base = dir.join("previews").join(variant);
+    let path = base.join(format!("{name}.png"));
+    if pixels.len() != w as usize * h as usize * channels || !(channels == 1 || channels == 3) {
+        return Err(Error::invalid(format!(
+            "preview {}: {} bytes for {w}×{h}×{channels}",
+            path.display(),
+            pixels.len()
+        )));
+    }
+    let mut buf = vec![];
+    {
+        let mut e = png::Encoder::new(&mut buf, w, h);
+        e.set_color(if channels == 1 {
+            png::ColorType::Grayscale
+        } else {
+            png::ColorType::Rgb
+        });
+        e.set_depth(png::BitDepth::Eight);
+        let mut wr = e.write_header().map_err(|e| Error::io(&path, e))?;
+        wr.write_image_data(pixels)
+            .map_err(|e| Error::io(&path, e))?;
+        wr.finish().map_err(|e| Error::io(&path, e))?;
+    }
+    crate::diag::write_atomic(&path, &buf)?;
+    if !rois.is_empty() {
+        let list: Vec<serde_json::Value> = rois
+            .iter()
+            .map(|(l, r)| serde_json::json!({"label": l, "x": r.x, "y": r.y, "w": r.w, "h": r.h}))
+            .collect();
+        let p = base.join(format!("{name}.rois.json"));
+        let text = serde_json::to_string_pretty(&list).map_err(|e| Error::io(&p, e))?;
+        crate::diag::write_atomic(&p, text.as_bytes())?;
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
