@@ -22,6 +22,9 @@ pub struct RenderArgs {
     pub out: PathBuf,
     #[arg(long)]
     pub seed: Option<u64>,
+    /// pbrt scenes: replace the ISET Cornell box placeholder materials by the paper's spectra.
+    #[arg(long)]
+    pub paper_spectra: bool,
 }
 
 #[derive(Args)]
@@ -62,18 +65,20 @@ pub fn render(a: RenderArgs) -> Result<i32> {
         .and_then(|e| e.to_str())
         .unwrap_or("")
         .to_ascii_lowercase();
-    if ext == "pbrt" {
-        return Err(Error::NotSupported(format!(
-            "{}: pbrt scenes (the pbrt parser is a separate issue); use a .kdl scene",
-            a.scene.display()
-        )));
-    }
-    if ext != "kdl" {
+    let sf = if ext == "kdl" {
+        load_kdl_scene(&a.scene)?
+    } else if ext == "pbrt" || ext == "gz" {
+        let mut scene = super::pov::load_scene(&a.scene)?;
+        if a.paper_spectra {
+            camsim::scene::pbrt::paper::apply_paper_spectra(&mut scene)?;
+        }
+        camsim::scene::kdl_scene::SceneFile { scene, spp: None, max_bounces: None, path: a.scene.clone() }
+    } else {
         return Err(Error::invalid(format!(
             "{}: unknown scene format (expected .kdl or .pbrt)",
             a.scene.display()
         )));
-    }
+    };
     let sf = load_kdl_scene(&a.scene)?;
     for w in &sf.scene.warnings {
         eprintln!("warning: {w}");

@@ -137,7 +137,20 @@ pub fn run_variant(v: &PlannedVariant) -> Result<VariantOutput> {
         && let Some(o) = &oi
     {
         let s = stages::simulate_sensor(spec, o)?;
-        let neutral = vec![1.0; s.cfa.channels.len()];
+        // Grey-world white balance for the preview only (raw DVs are untouched).
+        let nch = s.cfa.channels.len();
+        let mut sum = vec![0.0f64; nch];
+        let mut cnt = vec![0usize; nch];
+        for y in 0..s.height() {
+            for x in 0..s.width() {
+                let c = s.channel_at(x, y);
+                sum[c] += (s.dv_at(x, y) as f64 - s.black_level_dv).max(0.0);
+                cnt[c] += 1;
+            }
+        }
+        let means: Vec<f64> = (0..nch).map(|c| sum[c] / cnt[c].max(1) as f64).collect();
+        let top = means.iter().cloned().fold(1e-9, f64::max);
+        let neutral: Vec<f64> = means.iter().map(|m| (m / top).max(1e-3)).collect();
         out.previews.push(("sensor.png".into(), crate::sensor::output::preview_png_bytes(&s, &neutral)?, String::new()));
         si = Some(s);
     }
