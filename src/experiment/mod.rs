@@ -7,6 +7,7 @@
 //! - [`apply`]: typed values and parameter paths (shared by parser and sweeps)
 //! - [`sweep`]: axes, zip groups, ranges, variant ids
 //! - [`plan`]: variants + input hashes, JSON
+//! - [`measured`]: captured images (`measured` nodes), `compare`, `convergence`
 //! - [`stages`]: scene → camera → render → sensor → measure (one function each)
 //! - [`run`]: the runner (resume, shards, interruption)
 //! - [`results`]: CSV, manifest, merge
@@ -23,6 +24,7 @@ pub mod results;
 pub mod run;
 pub mod source;
 pub mod spec;
+pub mod measured;
 pub mod stages;
 pub mod sweep;
 pub mod units;
