@@ -335,3 +335,54 @@ fn compare_pairs_figures_by_quantity_and_unit() {
     let e = measured::compare(&m, &one, &reference).unwrap_err().to_string();
     assert!(e.contains("at least 2"), "{e}");
 }
+
+/// The shipped Cornell box on a 48×36 film: a full-film render costs
+/// milliseconds, so convergence can render it several times in a test.
+fn tiny_cornell_box(dir: &Path) {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cornell-box.kdl");
+    let text = std::fs::read_to_string(src).unwrap();
+    assert!(text.contains("film width-px=320 height-px=240"));
+    std::fs::write(dir.join("tiny.kdl"), text.replace("film width-px=320 height-px=240", "film width-px=48 height-px=36"))
+        .unwrap();
+}
+
+#[test]
+fn convergence_renders_each_spp_and_follows_the_figures() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    tiny_cornell_box(d);
+    let exp = d.join("conv.kdl");
+    std::fs::write(
+        &exp,
+        "experiment \"conv\" {\n    scene \"tiny.kdl\"\n    render max-bounces=1 seed=3\n    measure \"ri\"\n    measure \"convergence\" of=\"ri\" spp=(1 4 16) reference-spp=32 quantity=\"ri@max\"\n}\n",
+    )
+    .unwrap();
+    let mut all = vec![];
+    for out in ["out1", "out2"] {
+        let out = d.join(out);
+        let r = camsim(&["run", exp.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+        assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+        let rows = results(&out.join("conv/results.csv"));
+        for spp in [1, 4, 16] {
+            assert!(get(&rows, "convergence", &format!("spp{spp}/render_s")).0 > 0.0);
+            assert!(get(&rows, "convergence", &format!("ri@max/spp{spp}_stderr")).0 > 0.0);
+        }
+        let (slope, slope_se) = get(&rows, "convergence", "ri@max/stderr_time_slope");
+        assert!(slope.is_finite() && slope_se.is_finite());
+        // The error against the 32-spp reference carries the longest run's stderr.
+        let (_, e_se) = get(&rows, "convergence", "ri@max/error_at_longest");
+        assert_eq!(e_se, get(&rows, "convergence", "ri@max/spp16_stderr").0);
+        // quantity="ri@max" follows only that figure.
+        assert!(!rows.iter().any(|r| r.0 == "convergence" && r.1.starts_with("ri@half")));
+        let curves = std::fs::read_to_string(out.join("conv/curves/default/convergence.csv")).unwrap();
+        assert!(curves.contains("ri@max/stderr_vs_time") && curves.contains("ri@max/error_vs_time"));
+        // Everything but the timings is reproducible.
+        all.push(
+            rows.into_iter()
+                .filter(|r| r.2 != "s" && !r.1.contains("efficiency") && !r.1.contains("slope"))
+                .map(|r| format!("{} {} {} {}", r.0, r.1, r.3, r.4))
+                .collect::<Vec<_>>(),
+        );
+    }
+    assert_eq!(all[0], all[1], "same inputs and seed give the same figures");
+}

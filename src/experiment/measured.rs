@@ -20,7 +20,8 @@
 //!   quantities containing that text; `normalize="mean"` divides each side by
 //!   its mean over the pairs first (compares shapes, not exposure).
 //! - **convergence**: `measure "convergence" of="sfr" spp=(16 64 256)
-//!   [reference-spp=1024] [quantity="mtf50"]` renders the region the named
+//!   [reference-spp=1024] [quantity="mtf50"]` (quantities containing that
+//!   text; default all) renders the region the named
 //!   measurement reads once per sample count (each with its own seed,
 //!   `render.seed + 1 + k`, so the runs are independent), runs the same
 //!   stages and measurement, and reports per quantity the log–log slope of
@@ -488,26 +489,23 @@ pub fn convergence(m: &Measure, spec: &ResolvedExperiment) -> Result<Measured> {
     for (spp, (_, dt)) in &runs {
         out.figures.push(Figure::new(&m.name, format!("spp{spp}/render_s"), "s", *dt, 0.0));
     }
-    let matches = |q: &str| filter.is_none_or(|f| q == f || q.ends_with(&format!("/{f}")));
+    let matches = |q: &str| filter.is_none_or(|f| q.contains(f));
     let mut followed = 0;
     for f0 in runs[0].1.0.iter().filter(|f| matches(&f.quantity)) {
         let q = &f0.quantity;
-        let series: Vec<crate::measure::convergence::Run> = runs
+        let (spp_of, series): (Vec<u64>, Vec<crate::measure::convergence::Run>) = runs
             .iter()
-            .filter_map(|(_, (figs, dt))| {
-                figs.iter().find(|f| &f.quantity == q).map(|f| crate::measure::convergence::Run {
-                    render_s: *dt,
-                    value: f.value,
-                    stderr: f.stderr,
-                })
+            .filter_map(|(spp, (figs, dt))| {
+                let f = figs.iter().find(|f| &f.quantity == q && f.unit == f0.unit)?;
+                Some((*spp, crate::measure::convergence::Run { render_s: *dt, value: f.value, stderr: f.stderr }))
             })
-            .collect();
+            .unzip();
         if series.iter().filter(|r| r.stderr > 0.0 && r.render_s > 0.0).count() < 2 {
             continue; // an exact figure (no standard error) has nothing to converge
         }
         let rv = reference.as_ref().and_then(|r| r.iter().find(|f| &f.quantity == q)).map(|f| f.value);
         let mut c = crate::measure::convergence::convergence(&series, rv, q, &f0.unit, &m.name)?;
-        for ((spp, _), r) in runs.iter().zip(&series) {
+        for (spp, r) in spp_of.iter().zip(&series) {
             c.figures.push(Figure::new(&m.name, format!("{q}/spp{spp}_stderr"), &f0.unit, r.stderr, 0.0));
         }
         for cv in &mut c.curves {
