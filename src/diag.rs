@@ -25,14 +25,28 @@ pub struct Located {
 
 impl Located {
     /// Build from a byte offset into `source` (clamped into range, never panics).
-    pub fn at_offset(file: &Path, source: &str, offset: usize, len: usize, message: impl Into<String>) -> Self {
+    pub fn at_offset(
+        file: &Path,
+        source: &str,
+        offset: usize,
+        len: usize,
+        message: impl Into<String>,
+    ) -> Self {
         let (line, col, snippet) = line_col(source, offset);
         let len_chars = source
             .get(offset.min(source.len())..(offset + len).min(source.len()))
             .map(|s| s.chars().take_while(|&c| c != '\n').count())
             .unwrap_or(1)
             .max(1);
-        Self { file: file.to_path_buf(), line, col, message: message.into(), snippet, len: len_chars, help: None }
+        Self {
+            file: file.to_path_buf(),
+            line,
+            col,
+            message: message.into(),
+            snippet,
+            len: len_chars,
+            help: None,
+        }
     }
     pub fn with_help(mut self, help: impl Into<String>) -> Self {
         self.help = Some(help.into());
@@ -46,7 +60,14 @@ impl Located {
 
 impl fmt::Display for Located {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        writeln!(f, "{}:{}:{}: error: {}", self.file.display(), self.line, self.col, self.message)?;
+        writeln!(
+            f,
+            "{}:{}:{}: error: {}",
+            self.file.display(),
+            self.line,
+            self.col,
+            self.message
+        )?;
         if !self.snippet.is_empty() {
             let gutter = format!("{}", self.line);
             writeln!(f, "{} | {}", gutter, self.snippet)?;
@@ -77,13 +98,21 @@ pub fn line_col(source: &str, offset: usize) -> (usize, usize, String) {
     let line = before.matches('\n').count() + 1;
     let line_start = before.rfind('\n').map(|i| i + 1).unwrap_or(0);
     let col = source[line_start..off].chars().count() + 1;
-    let line_end = source[line_start..].find('\n').map(|i| line_start + i).unwrap_or(source.len());
-    let snippet = source[line_start..line_end].trim_end_matches('\r').to_string();
+    let line_end = source[line_start..]
+        .find('\n')
+        .map(|i| line_start + i)
+        .unwrap_or(source.len());
+    let snippet = source[line_start..line_end]
+        .trim_end_matches('\r')
+        .to_string();
     (line, col, snippet)
 }
 
 /// The closest candidate to `word` by Jaro–Winkler / Levenshtein, if close enough.
-pub fn did_you_mean<'a>(word: &str, candidates: impl IntoIterator<Item = &'a str>) -> Option<String> {
+pub fn did_you_mean<'a>(
+    word: &str,
+    candidates: impl IntoIterator<Item = &'a str>,
+) -> Option<String> {
     let mut best: Option<(f64, &str)> = None;
     for c in candidates {
         let d = strsim::levenshtein(word, c);
@@ -121,7 +150,10 @@ impl From<Located> for Error {
 
 impl Error {
     pub fn io(path: &Path, e: impl fmt::Display) -> Self {
-        Error::Io { path: path.to_path_buf(), message: e.to_string() }
+        Error::Io {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        }
     }
     pub fn invalid(msg: impl Into<String>) -> Self {
         Error::Invalid(msg.into())
@@ -134,7 +166,10 @@ pub type Result<T, E = Error> = std::result::Result<T, E>;
 /// A reader never sees a half-written file and an interrupted write loses nothing.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     use std::io::Write;
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| Error::io(dir, e))?;
     tmp.write_all(bytes).map_err(|e| Error::io(path, e))?;
@@ -156,7 +191,10 @@ mod tests {
     }
     #[test]
     fn suggestions() {
-        assert_eq!(did_you_mean("exposure-ms", ["exposure-s", "spp"]), Some("exposure-s".into()));
+        assert_eq!(
+            did_you_mean("exposure-ms", ["exposure-s", "spp"]),
+            Some("exposure-s".into())
+        );
         assert_eq!(did_you_mean("zzzz", ["exposure-s", "spp"]), None);
     }
     #[test]

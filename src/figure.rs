@@ -18,7 +18,19 @@ pub struct Figure {
 }
 
 impl Figure {
-    pub fn new(measurement: &str, quantity: impl Into<String>, unit: &str, value: f64, stderr: f64) -> Self {
-        Self { measurement: measurement.into(), quantity: quantity.into(), unit: unit.into(), value, stderr }
+    pub fn new(
+        measurement: &str,
+        quantity: impl Into<String>,
+        unit: &str,
+        value: f64,
+        stderr: f64,
+    ) -> Self {
+        Self {
+            measurement: measurement.into(),
+            quantity: quantity.into(),
+            unit: unit.into(),
+            value,
+            stderr,
+        }
     }
 }

@@ -20,17 +20,29 @@ impl CfaPattern {
     pub fn bayer(name: &str) -> Result<Self, String> {
         let name = name.to_ascii_lowercase();
         if name == "mono" {
-            return Ok(Self { width: 1, height: 1, cells: vec![0], channels: vec!["w".into()] });
+            return Ok(Self {
+                width: 1,
+                height: 1,
+                cells: vec![0],
+                channels: vec!["w".into()],
+            });
         }
         if name.len() != 4 || !name.chars().all(|c| matches!(c, 'r' | 'g' | 'b')) {
-            return Err(format!("unknown CFA pattern '{name}': expected rggb, bggr, grbg, gbrg or mono"));
+            return Err(format!(
+                "unknown CFA pattern '{name}': expected rggb, bggr, grbg, gbrg or mono"
+            ));
         }
         let cells = name.chars().map(|c| match c {
             'r' => 0,
             'g' => 1,
             _ => 2,
         });
-        Ok(Self { width: 2, height: 2, cells: cells.collect(), channels: vec!["r".into(), "g".into(), "b".into()] })
+        Ok(Self {
+            width: 2,
+            height: 2,
+            cells: cells.collect(),
+            channels: vec!["r".into(), "g".into(), "b".into()],
+        })
     }
     /// Channel index at full-frame pixel (x, y).
     pub fn channel_at(&self, x: u32, y: u32) -> usize {

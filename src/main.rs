@@ -10,7 +10,11 @@ mod cli;
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
-#[command(name = "camsim", version, about = "Physics-based camera simulation: scene → optics → sensor → measurements")]
+#[command(
+    name = "camsim",
+    version,
+    about = "Physics-based camera simulation: scene → optics → sensor → measurements"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,

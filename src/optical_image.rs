@@ -64,7 +64,13 @@ pub struct OpticalImage {
 
 impl OpticalImage {
     /// A zero image of the given window.
-    pub fn new(full_width: u32, full_height: u32, window: Rect, pixel_pitch_m: f64, grid: WavelengthGrid) -> Self {
+    pub fn new(
+        full_width: u32,
+        full_height: u32,
+        window: Rect,
+        pixel_pitch_m: f64,
+        grid: WavelengthGrid,
+    ) -> Self {
         let n = window.area() as usize;
         let nb = grid.len();
         Self {
@@ -105,6 +111,9 @@ impl OpticalImage {
     }
     /// Label id of a named object, if present.
     pub fn label_id(&self, name: &str) -> Option<u32> {
-        self.label_names.iter().position(|n| n == name).map(|i| i as u32)
+        self.label_names
+            .iter()
+            .position(|n| n == name)
+            .map(|i| i as u32)
     }
 }

@@ -88,6 +88,10 @@ impl Params {
     }
     /// Names not in `known` (for strict validation with suggestions).
     pub fn unknown<'a>(&'a self, known: &[&str]) -> Vec<&'a str> {
-        self.0.keys().filter(|k| !known.contains(&k.as_str())).map(|k| k.as_str()).collect()
+        self.0
+            .keys()
+            .filter(|k| !known.contains(&k.as_str()))
+            .map(|k| k.as_str())
+            .collect()
     }
 }

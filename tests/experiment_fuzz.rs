@@ -132,7 +132,10 @@ fn seeds() -> Vec<String> {
         &std::fs::read_to_string("tests/experiments/grid12.kdl").unwrap(),
     ));
     // Experiments with a base get a small base next to the fuzz file instead.
-    for (_, t) in experiment::embedded::EXPERIMENTS.iter().filter(|(_, t)| t.contains("base \"")) {
+    for (_, t) in experiment::embedded::EXPERIMENTS
+        .iter()
+        .filter(|(_, t)| t.contains("base \""))
+    {
         v.push(compact(t).replace("cornell-box.kdl", "small-setup.kdl"));
     }
     v.push(

@@ -121,11 +121,11 @@ fn bases_merge_and_overrides_win() {
             .ends_with("scenes/CornellBoxReference/CornellBoxReference.pbrt")
     );
     assert_eq!(s.camera.as_ref().unwrap().position_m, [0.0, 0.115, -0.40]);
-    assert_eq!(s.render.spp, 1024);
+    assert_eq!(s.render.spp, 128);
     assert_eq!(s.render.max_bounces, 2);
     assert_eq!(s.render.seed, 1);
     assert_eq!(s.additions.len(), 2);
-    assert_eq!(s.removals, ["cube-small", "cube-large"]);
+    assert_eq!(s.removals, ["CubeSmall", "CubeLarge"]);
     assert_eq!(s.measures[0].of, ["edge-near", "edge-far"]);
     assert_eq!(
         plan.variants[0].variant.id,
@@ -189,7 +189,7 @@ fn hashes_do_not_depend_on_how_the_file_is_reached() {
     // …but a changed input changes them.
     let text = std::fs::read_to_string("experiments/fig07-lsf-mtf.kdl")
         .unwrap()
-        .replace("spp=1024", "spp=512");
+        .replace("spp=128", "spp=512");
     let p = experiment::parse_source(
         Path::new("experiments/fig07-lsf-mtf.kdl"),
         text,

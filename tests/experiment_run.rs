@@ -311,8 +311,10 @@ fn missing_stage_fails_clearly_and_the_run_goes_on() {
     );
     assert_eq!(r.status.code(), Some(1));
     let err = stderr(&r);
+    // The scene renders, but the measured object does not exist: a clear
+    // failure for this variant, and the other experiment still runs.
     assert!(
-        err.contains("FAILED: not supported yet: scene loading"),
+        err.contains("FAILED: object 'edge' is not visible from the camera"),
         "{err}"
     );
     assert!(err.contains("color: 1 done"), "{err}");
@@ -326,7 +328,7 @@ fn missing_stage_fails_clearly_and_the_run_goes_on() {
         m["variants"][0]["error"]
             .as_str()
             .unwrap()
-            .contains("not supported yet")
+            .contains("not visible")
     );
     assert_eq!(read_rows(&out.join("color/results.csv")).len(), 3);
 }

@@ -49,13 +49,50 @@ fn cornell_box_kdl_renders_identically_on_one_and_two_threads() {
 }
 
 #[test]
-fn pbrt_is_not_supported_yet_and_kdl_errors_are_located() {
+fn pbrt_scenes_render_and_kdl_errors_are_located() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("bitterli.exr");
     let st = camsim()
-        .args(["render", "scenes/pbrt-v4/bitterli-cornell-box.pbrt"])
+        .args([
+            "render",
+            "scenes/pbrt-v4/bitterli-cornell-box.pbrt",
+            "--spp",
+            "1",
+            "--roi",
+            "0,0,16,16",
+            "--out",
+        ])
+        .arg(&out)
         .output()
         .unwrap();
-    assert_eq!(st.status.code(), Some(3));
-    assert!(String::from_utf8_lossy(&st.stderr).contains("not supported"));
+    assert_eq!(
+        st.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    assert!(out.exists() && out.with_extension("png").exists());
+    let out2 = dir.path().join("cbox.exr");
+    let st = camsim()
+        .args([
+            "render",
+            "scenes/CornellBoxReference/CornellBoxReference.pbrt",
+            "--paper-spectra",
+            "--spp",
+            "1",
+            "--roi",
+            "600,300,8,8",
+            "--out",
+        ])
+        .arg(&out2)
+        .output()
+        .unwrap();
+    assert_eq!(
+        st.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("bad.kdl");
     std::fs::write(&p, "film width-px=10 height-px=10\nshape \"x\" type=\"sphere\" material=\"nope\" { radius-m 1; }\n").unwrap();

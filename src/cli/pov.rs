@@ -21,8 +21,13 @@ pub struct PovArgs {
 pub fn load_scene(path: &Path) -> Result<camsim::scene::Scene> {
     match path.extension().and_then(|e| e.to_str()).unwrap_or("") {
         "kdl" => Ok(camsim::scene::kdl_scene::load_kdl_scene(path)?.scene),
-        "pbrt" | "gz" => camsim::scene::pbrt::load(path, &camsim::scene::pbrt::LoadOptions::default()),
-        _ => Err(Error::invalid(format!("{}: unknown scene format (expected .kdl or .pbrt)", path.display()))),
+        "pbrt" | "gz" => {
+            camsim::scene::pbrt::load(path, &camsim::scene::pbrt::LoadOptions::default())
+        }
+        _ => Err(Error::invalid(format!(
+            "{}: unknown scene format (expected .kdl or .pbrt)",
+            path.display()
+        ))),
     }
 }
 

@@ -72,14 +72,18 @@ pub fn render(a: RenderArgs) -> Result<i32> {
         if a.paper_spectra {
             camsim::scene::pbrt::paper::apply_paper_spectra(&mut scene)?;
         }
-        camsim::scene::kdl_scene::SceneFile { scene, spp: None, max_bounces: None, path: a.scene.clone() }
+        camsim::scene::kdl_scene::SceneFile {
+            scene,
+            spp: None,
+            max_bounces: None,
+            path: a.scene.clone(),
+        }
     } else {
         return Err(Error::invalid(format!(
             "{}: unknown scene format (expected .kdl or .pbrt)",
             a.scene.display()
         )));
     };
-    let sf = load_kdl_scene(&a.scene)?;
     for w in &sf.scene.warnings {
         eprintln!("warning: {w}");
     }

@@ -888,15 +888,24 @@ impl P {
                     }
                     v => {
                         return Err(self
-                            .e(e.vspan, format!("materials: expected \"paper\" or \"file\", found {}", apply::describe(v)))
-                            .with_help("materials=\"paper\" applies the paper's measured spectra"));
+                            .e(
+                                e.vspan,
+                                format!(
+                                    "materials: expected \"paper\" or \"file\", found {}",
+                                    apply::describe(v)
+                                ),
+                            )
+                            .with_help(
+                                "materials=\"paper\" applies the paper's measured spectra",
+                            ));
                     }
                 },
                 Some((k, s)) => {
                     return Err(self
                         .e(*s, format!("unexpected property '{k}' on 'scene'"))
                         .with_help_opt(
-                            crate::diag::did_you_mean(k, ["materials"]).map(|m| format!("did you mean '{m}'?")),
+                            crate::diag::did_you_mean(k, ["materials"])
+                                .map(|m| format!("did you mean '{m}'?")),
                         ));
                 }
                 None => positional.push(e),
@@ -905,9 +914,17 @@ impl P {
         match positional.as_slice() {
             [e] => match &e.value {
                 Value::String(s) => Ok((s.clone(), e.vspan)),
-                v => Err(self.e(e.vspan, format!("scene file: expected a string, found {}", apply::describe(v)))),
+                v => Err(self.e(
+                    e.vspan,
+                    format!(
+                        "scene file: expected a string, found {}",
+                        apply::describe(v)
+                    ),
+                )),
             },
-            [] => Err(self.e(sp, "'scene' needs the scene file").with_help("write scene \"….pbrt\"")),
+            [] => Err(self
+                .e(sp, "'scene' needs the scene file")
+                .with_help("write scene \"….pbrt\"")),
             [_, e, ..] => Err(self.e(e.vspan, "'scene' takes one file")),
         }
     }

@@ -131,7 +131,8 @@ pub fn run_variant(v: &PlannedVariant) -> Result<VariantOutput> {
         let p = tmp.path().join("oi.png");
         crate::render::output::write_png_preview(&p, o)?;
         let bytes = std::fs::read(&p).map_err(|e| Error::io(&p, e))?;
-        out.previews.push(("optical-image.png".into(), bytes, String::new()));
+        out.previews
+            .push(("optical-image.png".into(), bytes, String::new()));
     }
     if need.sensor_image
         && let Some(o) = &oi
@@ -151,7 +152,11 @@ pub fn run_variant(v: &PlannedVariant) -> Result<VariantOutput> {
         let means: Vec<f64> = (0..nch).map(|c| sum[c] / cnt[c].max(1) as f64).collect();
         let top = means.iter().cloned().fold(1e-9, f64::max);
         let neutral: Vec<f64> = means.iter().map(|m| (m / top).max(1e-3)).collect();
-        out.previews.push(("sensor.png".into(), crate::sensor::output::preview_png_bytes(&s, &neutral)?, String::new()));
+        out.previews.push((
+            "sensor.png".into(),
+            crate::sensor::output::preview_png_bytes(&s, &neutral)?,
+            String::new(),
+        ));
         si = Some(s);
     }
     let mut rois = vec![];
@@ -221,13 +226,21 @@ pub fn run_plan(plan: &Plan, opts: &RunOptions, progress: &mut dyn Progress) -> 
                     // Curves and previews first: a variant CSV on disk means its
                     // side files are complete.
                     for (name, curves) in &vo.curves {
-                        crate::report::results::write_curves(&dir.root, &v.variant.id, name, curves)?;
+                        crate::report::results::write_curves(
+                            &dir.root,
+                            &v.variant.id,
+                            name,
+                            curves,
+                        )?;
                     }
                     for (name, png, rois) in &vo.previews {
                         let p = dir.root.join("previews").join(&v.variant.id).join(name);
                         crate::diag::write_atomic(&p, png)?;
                         if !rois.is_empty() {
-                            crate::diag::write_atomic(&p.with_extension("rois.json"), rois.as_bytes())?;
+                            crate::diag::write_atomic(
+                                &p.with_extension("rois.json"),
+                                rois.as_bytes(),
+                            )?;
                         }
                     }
                     let total_s = t.elapsed().as_secs_f64();

@@ -89,18 +89,25 @@ pub fn build_scene(spec: &ResolvedExperiment) -> Result<Scene> {
                 spec.name
             ))
         })?;
-        let model = scene
-            .camera
-            .as_ref()
-            .map(|c| c.model.clone())
-            .unwrap_or(CameraModel::Pinhole { fov_deg: 40.0, f_number: 2.0 });
+        let model =
+            scene
+                .camera
+                .as_ref()
+                .map(|c| c.model.clone())
+                .unwrap_or(CameraModel::Pinhole {
+                    fov_deg: 40.0,
+                    f_number: 2.0,
+                });
         scene.camera = Some(CameraSpec { to_world, model });
     }
     Ok(scene)
 }
 
 fn object_matches(name: &str, wanted: &str) -> bool {
-    name == wanted || name.strip_prefix(wanted).is_some_and(|r| r.starts_with('/'))
+    name == wanted
+        || name
+            .strip_prefix(wanted)
+            .is_some_and(|r| r.starts_with('/'))
 }
 
 fn ids_matching(scene: &Scene, wanted: &str) -> Result<Vec<u32>> {
@@ -137,7 +144,9 @@ fn remove_object(scene: &mut Scene, name: &str) -> Result<()> {
 fn apply_override(scene: &mut Scene, o: &Override, spec: &ResolvedExperiment) -> Result<()> {
     let ids = ids_matching(scene, &o.object)?;
     let dir = spec.file.parent().unwrap_or(Path::new("."));
-    let unknown = o.params.unknown(&["reflectance", "radiance", "radiance-scale"]);
+    let unknown = o
+        .params
+        .unknown(&["reflectance", "radiance", "radiance-scale"]);
     if let Some(u) = unknown.first() {
         return Err(Error::invalid(format!(
             "override '{}': unknown property '{u}'; expected reflectance, radiance or radiance-scale",
@@ -172,7 +181,11 @@ fn apply_override(scene: &mut Scene, o: &Override, spec: &ResolvedExperiment) ->
         for id in touched_materials {
             if let Some(nm) = scene.materials.get_mut(id as usize) {
                 nm.material = match &nm.material {
-                    Material::DiffuseSpecular { diffuse, specular, roughness } => {
+                    Material::DiffuseSpecular {
+                        diffuse,
+                        specular,
+                        roughness,
+                    } => {
                         // keep the specular-to-diffuse ratio of the original
                         let k = specular.values.iter().cloned().fold(0.0, f64::max)
                             / diffuse.values.iter().cloned().fold(1e-12, f64::max);
@@ -183,7 +196,9 @@ fn apply_override(scene: &mut Scene, o: &Override, spec: &ResolvedExperiment) ->
                             roughness: *roughness,
                         }
                     }
-                    _ => Material::Diffuse { reflectance: r.clone() },
+                    _ => Material::Diffuse {
+                        reflectance: r.clone(),
+                    },
                 };
             }
         }
@@ -242,10 +257,9 @@ fn add_object(scene: &mut Scene, a: &Addition, dir: &Path) -> Result<()> {
             targets::add_slanted_edge(scene, &e)
         }
         Target::Mesh => {
-            let f = a
-                .file
-                .as_ref()
-                .ok_or_else(|| Error::invalid(format!("add '{}': target=\"mesh\" needs file=\"…\"", a.id)))?;
+            let f = a.file.as_ref().ok_or_else(|| {
+                Error::invalid(format!("add '{}': target=\"mesh\" needs file=\"…\"", a.id))
+            })?;
             let mut m = targets::PlacedMesh::bunny(&f.path)?;
             m.name = a.id.clone();
             m.position_m = pos;
@@ -261,7 +275,9 @@ fn add_object(scene: &mut Scene, a: &Addition, dir: &Path) -> Result<()> {
 
 /// The sensor of a variant: its file (or the generic sensor) with inline overrides.
 pub fn sensor_config(spec: &ResolvedExperiment) -> Result<Option<SensorConfig>> {
-    let Some(s) = &spec.sensor else { return Ok(None) };
+    let Some(s) = &spec.sensor else {
+        return Ok(None);
+    };
     let mut cfg = match &s.file {
         Some(f) => SensorConfig::load(&f.path)?,
         None => SensorConfig::generic(),
@@ -278,7 +294,12 @@ pub fn film_spec(spec: &ResolvedExperiment, scene: &Scene) -> Result<FilmSpec> {
     if let Some(cfg) = sensor_config(spec)?
         && let (Some(c), Some(r)) = (cfg.cols, cfg.rows)
     {
-        return Ok(FilmSpec { width_px: c, height_px: r, pixel_pitch_m: cfg.pixel_size_m, crop_window: None });
+        return Ok(FilmSpec {
+            width_px: c,
+            height_px: r,
+            pixel_pitch_m: cfg.pixel_size_m,
+            crop_window: None,
+        });
     }
     Ok(scene.film.clone().unwrap_or_default())
 }
@@ -301,7 +322,12 @@ pub fn build_camera(spec: &ResolvedExperiment, scene: &Scene) -> Result<Box<dyn 
                     f.written
                 )));
             }
-            return crate::optics::analysis::load_lens_camera(&f.path, fd_mm.map(|d| d * 1e-3), focus_m, None);
+            return crate::optics::analysis::load_lens_camera(
+                &f.path,
+                fd_mm.map(|d| d * 1e-3),
+                focus_m,
+                None,
+            );
         }
         let model = p.str("model").map_err(Error::invalid)?.unwrap_or("pinhole");
         let fnum = p.f64("f-number").map_err(Error::invalid)?.unwrap_or(2.0);
@@ -311,33 +337,57 @@ pub fn build_camera(spec: &ResolvedExperiment, scene: &Scene) -> Result<Box<dyn 
                     .f64("fov-deg")
                     .map_err(Error::invalid)?
                     .ok_or_else(|| Error::invalid("lens model=\"pinhole\" needs fov-deg"))?;
-                Ok(Box::new(crate::optics::pinhole::Pinhole::new(fov, fnum, &film)?))
+                Ok(Box::new(crate::optics::pinhole::Pinhole::new(
+                    fov, fnum, &film,
+                )?))
             }
             "thin-lens" => {
                 let f_mm = p
                     .f64("focal-length-mm")
                     .map_err(Error::invalid)?
-                    .ok_or_else(|| Error::invalid("lens model=\"thin-lens\" needs focal-length-mm"))?;
+                    .ok_or_else(|| {
+                        Error::invalid("lens model=\"thin-lens\" needs focal-length-mm")
+                    })?;
                 let focus = focus_m.unwrap_or(f64::INFINITY);
-                Ok(Box::new(crate::optics::thin_lens::ThinLens::new(f_mm * 1e-3, fnum, focus)?))
+                Ok(Box::new(crate::optics::thin_lens::ThinLens::new(
+                    f_mm * 1e-3,
+                    fnum,
+                    focus,
+                )?))
             }
             other => Err(Error::invalid(format!(
                 "lens model '{other}': expected \"pinhole\" or \"thin-lens\", or a lens file"
             ))),
         };
     }
-    let cam = scene
-        .camera
-        .as_ref()
-        .ok_or_else(|| Error::invalid(format!("experiment '{}' has no camera and no lens", spec.name)))?;
+    let cam = scene.camera.as_ref().ok_or_else(|| {
+        Error::invalid(format!(
+            "experiment '{}' has no camera and no lens",
+            spec.name
+        ))
+    })?;
     match &cam.model {
         CameraModel::Pinhole { .. } => crate::optics::pinhole::camera_from_spec(cam, &film),
-        CameraModel::ThinLens { focal_length_m, f_number, focus_distance_m } => Ok(Box::new(
-            crate::optics::thin_lens::ThinLens::new(*focal_length_m, *f_number, *focus_distance_m)?,
-        )),
-        CameraModel::LensFile { path, film_distance_m, focus_distance_m, aperture_diameter_m } => {
-            crate::optics::analysis::load_lens_camera(path, *film_distance_m, *focus_distance_m, *aperture_diameter_m)
-        }
+        CameraModel::ThinLens {
+            focal_length_m,
+            f_number,
+            focus_distance_m,
+        } => Ok(Box::new(crate::optics::thin_lens::ThinLens::new(
+            *focal_length_m,
+            *f_number,
+            *focus_distance_m,
+        )?)),
+        CameraModel::LensFile {
+            path,
+            film_distance_m,
+            focus_distance_m,
+            aperture_diameter_m,
+        } => crate::optics::analysis::load_lens_camera(
+            path,
+            *film_distance_m,
+            *focus_distance_m,
+            *aperture_diameter_m,
+        ),
     }
 }
 
@@ -352,7 +402,9 @@ fn wanted_objects(spec: &ResolvedExperiment) -> Option<Vec<(String, bool)>> {
         match m.kind.as_str() {
             "colorimetry" | "compare" | "convergence" => {}
             "sfr" => v.extend(m.of.iter().map(|o| (o.clone(), true))),
-            "profile" | "mcc" if !m.of.is_empty() => v.extend(m.of.iter().map(|o| (o.clone(), false))),
+            "profile" | "mcc" if !m.of.is_empty() => {
+                v.extend(m.of.iter().map(|o| (o.clone(), false)))
+            }
             "mcc" => v.push(("mcc".into(), false)),
             _ => return None,
         }
@@ -365,14 +417,26 @@ fn wanted_objects(spec: &ResolvedExperiment) -> Option<Vec<(String, bool)>> {
 /// centre (≥ 11 rows make one phase cycle at 5°).
 fn edge_strip(b: Rect) -> Rect {
     let h = (b.h / 2).clamp(8.min(b.h), 128);
-    Rect::new(b.x + b.w / 4, b.y + (b.h - h) / 2, (b.w / 2).max(8.min(b.w)), h)
+    Rect::new(
+        b.x + b.w / 4,
+        b.y + (b.h - h) / 2,
+        (b.w / 2).max(8.min(b.w)),
+        h,
+    )
 }
 
 /// Find the film rectangle holding `objects` with a cheap label pass: a coarse
 /// film (≤ 512 px on its long side), 1 spp, primary hits only, through the
 /// same camera; boxes are scaled back and padded by two coarse pixels.
-fn roi_of_objects(scene: &Scene, camera: &dyn Camera, film: &FilmSpec, objects: &[(String, bool)]) -> Result<Rect> {
-    let k = (film.width_px.max(film.height_px) as f64 / 512.0).ceil().max(1.0) as u32;
+fn roi_of_objects(
+    scene: &Scene,
+    camera: &dyn Camera,
+    film: &FilmSpec,
+    objects: &[(String, bool)],
+) -> Result<Rect> {
+    let k = (film.width_px.max(film.height_px) as f64 / 512.0)
+        .ceil()
+        .max(1.0) as u32;
     let coarse = FilmSpec {
         width_px: film.width_px.div_ceil(k),
         height_px: film.height_px.div_ceil(k),
@@ -408,7 +472,9 @@ fn roi_of_objects(scene: &Scene, camera: &dyn Camera, film: &FilmSpec, objects: 
             }
         }
         if x0 == u32::MAX {
-            return Err(Error::invalid(format!("object '{name}' is not visible from the camera")));
+            return Err(Error::invalid(format!(
+                "object '{name}' is not visible from the camera"
+            )));
         }
         let fx0 = (x0.saturating_sub(2) * k).min(film.width_px - 1);
         let fy0 = (y0.saturating_sub(2) * k).min(film.height_px - 1);
@@ -431,14 +497,19 @@ fn roi_of_objects(scene: &Scene, camera: &dyn Camera, film: &FilmSpec, objects: 
 }
 
 /// Render the optical image (only the regions the measurements read).
-pub fn render(spec: &ResolvedExperiment, scene: &Scene, camera: &dyn Camera) -> Result<OpticalImage> {
+pub fn render(
+    spec: &ResolvedExperiment,
+    scene: &Scene,
+    camera: &dyn Camera,
+) -> Result<OpticalImage> {
     let film = film_spec(spec, scene)?;
     let roi = match wanted_objects(spec) {
         Some(objs) if !objs.is_empty() => Some(roi_of_objects(scene, camera, &film, &objs)?),
         _ => None,
     };
     let settings = RenderSettings {
-        spp: u32::try_from(spec.render.spp).map_err(|_| Error::invalid("render spp is too large"))?,
+        spp: u32::try_from(spec.render.spp)
+            .map_err(|_| Error::invalid("render spp is too large"))?,
         max_bounces: spec.render.max_bounces,
         grid: spec.render.wavelength.clone(),
         seed: spec.render.seed,
@@ -457,8 +528,12 @@ pub fn simulate_sensor(spec: &ResolvedExperiment, oi: &OpticalImage) -> Result<S
 
 /// Bounding box (window coordinates) of the pixels labelled `name` (or below it).
 fn label_box(labels: &[u32], names: &[String], w: u32, h: u32, name: &str) -> Result<Rect> {
-    let ids: Vec<u32> =
-        names.iter().enumerate().filter(|(_, n)| object_matches(n, name)).map(|(i, _)| i as u32).collect();
+    let ids: Vec<u32> = names
+        .iter()
+        .enumerate()
+        .filter(|(_, n)| object_matches(n, name))
+        .map(|(i, _)| i as u32)
+        .collect();
     let (mut x0, mut y0, mut x1, mut y1) = (u32::MAX, u32::MAX, 0u32, 0u32);
     for y in 0..h {
         for x in 0..w {
@@ -471,7 +546,9 @@ fn label_box(labels: &[u32], names: &[String], w: u32, h: u32, name: &str) -> Re
         }
     }
     if x0 == u32::MAX {
-        return Err(Error::invalid(format!("object '{name}' is not in the measured image")));
+        return Err(Error::invalid(format!(
+            "object '{name}' is not in the measured image"
+        )));
     }
     Ok(Rect::new(x0, y0, x1 - x0, y1 - y0))
 }
@@ -493,20 +570,32 @@ pub fn measure(
     oi: Option<&OpticalImage>,
     si: Option<&SensorImage>,
 ) -> Result<Measured> {
-    let need_si = || si.ok_or_else(|| Error::invalid(format!("measurement '{}' needs a sensor image", m.name)));
+    let need_si = || {
+        si.ok_or_else(|| Error::invalid(format!("measurement '{}' needs a sensor image", m.name)))
+    };
     match m.kind.as_str() {
-        "colorimetry" => Ok(Measured { figures: colorimetry(m, spec)?, ..Default::default() }),
+        "colorimetry" => Ok(Measured {
+            figures: colorimetry(m, spec)?,
+            ..Default::default()
+        }),
         "sfr" => {
             let si = need_si()?;
             let plane = Plane::from_sensor(si)?;
-            let channel = m.params.str("channel").map_err(Error::invalid)?.unwrap_or("lum");
+            let channel = m
+                .params
+                .str("channel")
+                .map_err(Error::invalid)?
+                .unwrap_or("lum");
             let opts = SfrOptions {
                 channel: SfrChannel::parse(channel)?,
                 pixel_pitch_m: Some(si.pixel_pitch_m),
                 ..Default::default()
             };
             if m.of.is_empty() {
-                return Err(Error::invalid(format!("measurement '{}': sfr needs of=\"<edge object>\"", m.name)));
+                return Err(Error::invalid(format!(
+                    "measurement '{}': sfr needs of=\"<edge object>\"",
+                    m.name
+                )));
             }
             let mut out = Measured::default();
             for obj in &m.of {
@@ -514,7 +603,11 @@ pub fn measure(
                 // that strip when the runner chose it, so the label box is clipped
                 // to it; measure the part of the window the plate covers.
                 let b = label_box(&si.labels, &si.label_names, si.width(), si.height(), obj)?;
-                let roi = if b.w == si.width() || b.h == si.height() { b } else { edge_strip(b) };
+                let roi = if b.w == si.width() || b.h == si.height() {
+                    b
+                } else {
+                    edge_strip(b)
+                };
                 let (sfr, roi) = crate::measure::sfr::sfr_of_region(&plane, roi, &opts)?;
                 let r = prefixed(sfr.measured(&m.name, roi), obj);
                 out.figures.extend(r.figures);
@@ -549,12 +642,16 @@ pub fn measure(
             Ok(crate::measure::noise::measure(&plane, &opts, &m.name)?.0)
         }
         "ri" => {
-            let oi = oi.ok_or_else(|| Error::invalid(format!("measurement '{}' needs an optical image", m.name)))?;
+            let oi = oi.ok_or_else(|| {
+                Error::invalid(format!("measurement '{}' needs an optical image", m.name))
+            })?;
             // band-integrated irradiance (W/m²) per pixel
             let n = oi.bands();
             let data: Vec<f64> = (0..oi.window.area() as usize)
                 .map(|i| {
-                    (0..n).map(|b| oi.irradiance[i * n + b] as f64 * oi.grid.trapezoid_weight(b)).sum()
+                    (0..n)
+                        .map(|b| oi.irradiance[i * n + b] as f64 * oi.grid.trapezoid_weight(b))
+                        .sum()
                 })
                 .collect();
             let plane = Plane::new(oi.width() as usize, oi.height() as usize, data)?;

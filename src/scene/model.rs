@@ -38,13 +38,21 @@ pub enum Material {
     /// Lambertian base plus a small glossy specular lobe — the paper's walls and
     /// cubes ("primarily Lambertian, with a small specular term"; pbrt-v3 `uber`
     /// Kd/Ks). `roughness` is the microfacet alpha (0 = mirror-like highlight).
-    DiffuseSpecular { diffuse: Spectrum, specular: Spectrum, roughness: f64 },
+    DiffuseSpecular {
+        diffuse: Spectrum,
+        specular: Spectrum,
+        roughness: f64,
+    },
     /// Perfect mirror with spectral reflectance.
     Mirror { reflectance: Spectrum },
     /// Smooth dielectric interface; a non-constant `ior` is dispersive.
     Dielectric { ior: Spectrum },
     /// Smooth or rough conductor (Fresnel from eta, k).
-    Conductor { eta: Spectrum, k: Spectrum, roughness: f64 },
+    Conductor {
+        eta: Spectrum,
+        k: Spectrum,
+        roughness: f64,
+    },
     /// Absorbs everything.
     Black,
 }
@@ -106,12 +114,24 @@ pub struct Instance {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub enum Light {
     /// Isotropic point light; intensity in W/(sr·nm).
-    Point { position: DVec3, intensity: Spectrum },
+    Point {
+        position: DVec3,
+        intensity: Spectrum,
+    },
     /// Spot light: intensity W/(sr·nm) on axis, smooth fall-off between the angles.
-    Spot { position: DVec3, direction: DVec3, cone_angle_deg: f64, falloff_start_deg: f64, intensity: Spectrum },
+    Spot {
+        position: DVec3,
+        direction: DVec3,
+        cone_angle_deg: f64,
+        falloff_start_deg: f64,
+        intensity: Spectrum,
+    },
     /// Directional light; `direction` is where the light travels; irradiance on a
     /// surface perpendicular to it in W/(m²·nm).
-    Distant { direction: DVec3, irradiance: Spectrum },
+    Distant {
+        direction: DVec3,
+        irradiance: Spectrum,
+    },
     /// Uniform environment of constant radiance W/(sr·m²·nm) (flat-field light).
     Infinite { radiance: Spectrum },
 }
@@ -126,7 +146,11 @@ pub struct CameraPose {
 
 impl Default for CameraPose {
     fn default() -> Self {
-        Self { position: DVec3::new(0.0, 0.0, -1.0), look_at: DVec3::ZERO, up: DVec3::Y }
+        Self {
+            position: DVec3::new(0.0, 0.0, -1.0),
+            look_at: DVec3::ZERO,
+            up: DVec3::Y,
+        }
     }
 }
 
@@ -138,9 +162,18 @@ pub enum CameraModel {
     /// shorter film side (pbrt's convention).
     Pinhole { fov_deg: f64, f_number: f64 },
     /// Ideal thin lens.
-    ThinLens { focal_length_m: f64, f_number: f64, focus_distance_m: f64 },
+    ThinLens {
+        focal_length_m: f64,
+        f_number: f64,
+        focus_distance_m: f64,
+    },
     /// A lens file (prescription or RTF JSON) with a film distance or focus distance.
-    LensFile { path: std::path::PathBuf, film_distance_m: Option<f64>, focus_distance_m: Option<f64>, aperture_diameter_m: Option<f64> },
+    LensFile {
+        path: std::path::PathBuf,
+        film_distance_m: Option<f64>,
+        focus_distance_m: Option<f64>,
+        aperture_diameter_m: Option<f64>,
+    },
 }
 
 /// The scene's own camera (pbrt `Camera`, or KDL `camera`).
@@ -163,7 +196,12 @@ pub struct FilmSpec {
 
 impl Default for FilmSpec {
     fn default() -> Self {
-        Self { width_px: 256, height_px: 256, pixel_pitch_m: 1.4e-6, crop_window: None }
+        Self {
+            width_px: 256,
+            height_px: 256,
+            pixel_pitch_m: 1.4e-6,
+            crop_window: None,
+        }
     }
 }
 
@@ -189,7 +227,9 @@ impl Scene {
         if let Some(i) = self.objects.iter().position(|o| o.name == name) {
             return i as ObjectId;
         }
-        self.objects.push(Object { name: name.to_string() });
+        self.objects.push(Object {
+            name: name.to_string(),
+        });
         (self.objects.len() - 1) as ObjectId
     }
     /// Add a material and return its id (a same-named material is replaced).
@@ -198,7 +238,10 @@ impl Scene {
             self.materials[i].material = material;
             return i as MaterialId;
         }
-        self.materials.push(NamedMaterial { name: name.to_string(), material });
+        self.materials.push(NamedMaterial {
+            name: name.to_string(),
+            material,
+        });
         (self.materials.len() - 1) as MaterialId
     }
     pub fn triangle_count(&self) -> usize {
@@ -223,5 +266,10 @@ pub fn look_at_to_world(pose: &CameraPose) -> Option<DMat4> {
     }
     let right = right.normalize();
     let up = f.cross(right);
-    Some(DMat4::from_cols(right.extend(0.0), up.extend(0.0), f.extend(0.0), pose.position.extend(1.0)))
+    Some(DMat4::from_cols(
+        right.extend(0.0),
+        up.extend(0.0),
+        f.extend(0.0),
+        pose.position.extend(1.0),
+    ))
 }

@@ -44,7 +44,11 @@ impl SpectralTable {
                 }
                 Some(h) => {
                     if fields.len() != h.len() {
-                        return Err(format!("{source}:{line_no}:1: expected {} fields, found {}", h.len(), fields.len()));
+                        return Err(format!(
+                            "{source}:{line_no}:1: expected {} fields, found {}",
+                            h.len(),
+                            fields.len()
+                        ));
                     }
                     let mut col = 1;
                     for (i, f) in fields.iter().enumerate() {
@@ -52,13 +56,17 @@ impl SpectralTable {
                             format!("{source}:{line_no}:{col}: expected a number in column '{}', found '{f}'", h[i])
                         })?;
                         if !v.is_finite() {
-                            return Err(format!("{source}:{line_no}:{col}: value '{f}' is not finite"));
+                            return Err(format!(
+                                "{source}:{line_no}:{col}: value '{f}' is not finite"
+                            ));
                         }
                         if i == 0 {
                             if let Some(&prev) = wl.last()
                                 && v <= prev
                             {
-                                return Err(format!("{source}:{line_no}:{col}: wavelengths must increase ({prev} then {v})"));
+                                return Err(format!(
+                                    "{source}:{line_no}:{col}: wavelengths must increase ({prev} then {v})"
+                                ));
                             }
                             wl.push(v);
                         } else {
@@ -69,7 +77,8 @@ impl SpectralTable {
                 }
             }
         }
-        let header = header.ok_or_else(|| format!("{source}: no header row (expected 'wavelength_nm,…')"))?;
+        let header = header
+            .ok_or_else(|| format!("{source}: no header row (expected 'wavelength_nm,…')"))?;
         if wl.is_empty() {
             return Err(format!("{source}: no data rows"));
         }
@@ -82,7 +91,8 @@ impl SpectralTable {
     }
 
     pub fn load(path: &Path) -> Result<Self, String> {
-        let text = std::fs::read_to_string(path).map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
         Self::parse(&text, &path.display().to_string())
     }
 
@@ -92,7 +102,9 @@ impl SpectralTable {
 
     /// The units declared in a `# units:` comment, if any.
     pub fn units(&self) -> Option<&str> {
-        self.comments.iter().find_map(|c| c.strip_prefix("units:").map(|u| u.trim()))
+        self.comments
+            .iter()
+            .find_map(|c| c.strip_prefix("units:").map(|u| u.trim()))
     }
 
     /// One column as a spectrum; unknown names get a did-you-mean suggestion.
@@ -104,7 +116,11 @@ impl SpectralTable {
                 let hint = crate::diag::did_you_mean(column, names.iter().copied())
                     .map(|s| format!(" (did you mean '{s}'?)"))
                     .unwrap_or_default();
-                Err(format!("{}: no column '{column}'{hint}; columns are: {}", self.source, names.join(", ")))
+                Err(format!(
+                    "{}: no column '{column}'{hint}; columns are: {}",
+                    self.source,
+                    names.join(", ")
+                ))
             }
         }
     }
@@ -115,7 +131,8 @@ mod tests {
     use super::*;
     #[test]
     fn parses_comments_header_and_columns() {
-        let t = SpectralTable::parse("# units: W\nwavelength_nm,a,b\n400,1,2\n410,3,4\n", "x.csv").unwrap();
+        let t = SpectralTable::parse("# units: W\nwavelength_nm,a,b\n400,1,2\n410,3,4\n", "x.csv")
+            .unwrap();
         assert_eq!(t.units(), Some("W"));
         assert_eq!(t.spectrum("b").unwrap().values, vec![2.0, 4.0]);
         let e = t.spectrum("bb").unwrap_err();
@@ -125,7 +142,11 @@ mod tests {
     fn errors_name_line_and_column() {
         let e = SpectralTable::parse("wavelength_nm,a\n400,x\n", "f.csv").unwrap_err();
         assert!(e.starts_with("f.csv:2:5:"), "{e}");
-        assert!(SpectralTable::parse("nm,a\n", "f.csv").unwrap_err().contains("f.csv:1:1"));
+        assert!(
+            SpectralTable::parse("nm,a\n", "f.csv")
+                .unwrap_err()
+                .contains("f.csv:1:1")
+        );
         assert!(SpectralTable::parse("wavelength_nm,a\n410,1\n400,1\n", "f.csv").is_err());
     }
 }

@@ -29,7 +29,10 @@ struct Embedded {
 
 macro_rules! embed {
     ($p:literal) => {
-        Embedded { path: $p, text: include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/", $p)) }
+        Embedded {
+            path: $p,
+            text: include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/", $p)),
+        }
     };
 }
 
@@ -61,34 +64,184 @@ fn entries() -> &'static Vec<Entry> {
         use Extrapolation::*;
         let rad = "W/(sr·m²·nm)";
         let mut v: Vec<Entry> = vec![
-            ("cie1931-x".into(), "data/cie/cie1931_2deg_cmf_380-780_5nm.csv", 0, Zero, "1"),
-            ("cie1931-y".into(), "data/cie/cie1931_2deg_cmf_380-780_5nm.csv", 1, Zero, "1"),
-            ("cie1931-z".into(), "data/cie/cie1931_2deg_cmf_380-780_5nm.csv", 2, Zero, "1"),
-            ("cie-a".into(), "data/lights/cie_illuminants_A_D65_F2_380-780_5nm.csv", 0, Zero, "relative"),
-            ("cie-d65".into(), "data/lights/cie_illuminants_A_D65_F2_380-780_5nm.csv", 1, Zero, "relative"),
-            ("cie-f2".into(), "data/lights/cie_illuminants_A_D65_F2_380-780_5nm.csv", 2, Zero, "relative"),
-            ("iset-d65".into(), "data/lights/D65.csv", 0, Zero, "relative"),
-            ("iset-a".into(), "data/lights/illuminantA.csv", 0, Zero, "relative"),
-            ("gretag-a".into(), "data/lights/gretag_illA_20201023.csv", 0, Zero, rad),
-            ("gretag-cwf".into(), "data/lights/gretag_illCWF_20201023.csv", 0, Zero, rad),
-            ("gretag-day".into(), "data/lights/gretag_illDay_20201023.csv", 0, Zero, rad),
-            ("cbox-lamp-2020-11-03".into(), "data/cornellbox/cbox_lamp_spd_2020-11-03.csv", 0, Zero, rad),
-            ("cbox-red-wall".into(), "data/cornellbox/cbox_surfaces_reflectance.csv", 0, Clamp, "1"),
-            ("cbox-green-wall".into(), "data/cornellbox/cbox_surfaces_reflectance.csv", 1, Clamp, "1"),
-            ("cbox-white-wall".into(), "data/cornellbox/cbox_surfaces_reflectance.csv", 2, Clamp, "1"),
-            ("p4a-qe-r".into(), "data/sensor/p4a_corrected_color_filters.csv", 0, Zero, "1"),
-            ("p4a-qe-g".into(), "data/sensor/p4a_corrected_color_filters.csv", 1, Zero, "1"),
-            ("p4a-qe-b".into(), "data/sensor/p4a_corrected_color_filters.csv", 2, Zero, "1"),
-            ("imx363-qe-r".into(), "data/sensor/imx363_qe_public.csv", 0, Zero, "1"),
-            ("imx363-qe-g".into(), "data/sensor/imx363_qe_public.csv", 1, Zero, "1"),
-            ("imx363-qe-b".into(), "data/sensor/imx363_qe_public.csv", 2, Zero, "1"),
-            ("ircf-largan".into(), "data/sensor/ircf_public_Largan_K098-BIR690UV.csv", 0, Zero, "1"),
+            (
+                "cie1931-x".into(),
+                "data/cie/cie1931_2deg_cmf_380-780_5nm.csv",
+                0,
+                Zero,
+                "1",
+            ),
+            (
+                "cie1931-y".into(),
+                "data/cie/cie1931_2deg_cmf_380-780_5nm.csv",
+                1,
+                Zero,
+                "1",
+            ),
+            (
+                "cie1931-z".into(),
+                "data/cie/cie1931_2deg_cmf_380-780_5nm.csv",
+                2,
+                Zero,
+                "1",
+            ),
+            (
+                "cie-a".into(),
+                "data/lights/cie_illuminants_A_D65_F2_380-780_5nm.csv",
+                0,
+                Zero,
+                "relative",
+            ),
+            (
+                "cie-d65".into(),
+                "data/lights/cie_illuminants_A_D65_F2_380-780_5nm.csv",
+                1,
+                Zero,
+                "relative",
+            ),
+            (
+                "cie-f2".into(),
+                "data/lights/cie_illuminants_A_D65_F2_380-780_5nm.csv",
+                2,
+                Zero,
+                "relative",
+            ),
+            (
+                "iset-d65".into(),
+                "data/lights/D65.csv",
+                0,
+                Zero,
+                "relative",
+            ),
+            (
+                "iset-a".into(),
+                "data/lights/illuminantA.csv",
+                0,
+                Zero,
+                "relative",
+            ),
+            (
+                "gretag-a".into(),
+                "data/lights/gretag_illA_20201023.csv",
+                0,
+                Zero,
+                rad,
+            ),
+            (
+                "gretag-cwf".into(),
+                "data/lights/gretag_illCWF_20201023.csv",
+                0,
+                Zero,
+                rad,
+            ),
+            (
+                "gretag-day".into(),
+                "data/lights/gretag_illDay_20201023.csv",
+                0,
+                Zero,
+                rad,
+            ),
+            (
+                "cbox-lamp-2020-11-03".into(),
+                "data/cornellbox/cbox_lamp_spd_2020-11-03.csv",
+                0,
+                Zero,
+                rad,
+            ),
+            (
+                "cbox-red-wall".into(),
+                "data/cornellbox/cbox_surfaces_reflectance.csv",
+                0,
+                Clamp,
+                "1",
+            ),
+            (
+                "cbox-green-wall".into(),
+                "data/cornellbox/cbox_surfaces_reflectance.csv",
+                1,
+                Clamp,
+                "1",
+            ),
+            (
+                "cbox-white-wall".into(),
+                "data/cornellbox/cbox_surfaces_reflectance.csv",
+                2,
+                Clamp,
+                "1",
+            ),
+            (
+                "p4a-qe-r".into(),
+                "data/sensor/p4a_corrected_color_filters.csv",
+                0,
+                Zero,
+                "1",
+            ),
+            (
+                "p4a-qe-g".into(),
+                "data/sensor/p4a_corrected_color_filters.csv",
+                1,
+                Zero,
+                "1",
+            ),
+            (
+                "p4a-qe-b".into(),
+                "data/sensor/p4a_corrected_color_filters.csv",
+                2,
+                Zero,
+                "1",
+            ),
+            (
+                "imx363-qe-r".into(),
+                "data/sensor/imx363_qe_public.csv",
+                0,
+                Zero,
+                "1",
+            ),
+            (
+                "imx363-qe-g".into(),
+                "data/sensor/imx363_qe_public.csv",
+                1,
+                Zero,
+                "1",
+            ),
+            (
+                "imx363-qe-b".into(),
+                "data/sensor/imx363_qe_public.csv",
+                2,
+                Zero,
+                "1",
+            ),
+            (
+                "ircf-largan".into(),
+                "data/sensor/ircf_public_Largan_K098-BIR690UV.csv",
+                0,
+                Zero,
+                "1",
+            ),
         ];
         // The Cornell box lamp: PR-670 column 'cbox-lights-1' (index found by name below).
-        v.push(("cbox-lamp".into(), "data/cornellbox/pr670_2020-12-11_radiance.csv", usize::MAX, Zero, rad));
+        v.push((
+            "cbox-lamp".into(),
+            "data/cornellbox/pr670_2020-12-11_radiance.csv",
+            usize::MAX,
+            Zero,
+            rad,
+        ));
         for i in 1..=24 {
-            v.push((format!("mcc-mini-{i:02}"), "data/surfaces/MiniatureMacbethChart_reflectance.csv", i - 1, Clamp, "1"));
-            v.push((format!("mcc-{i:02}"), "data/surfaces/macbethChart_reflectance.csv", i - 1, Clamp, "1"));
+            v.push((
+                format!("mcc-mini-{i:02}"),
+                "data/surfaces/MiniatureMacbethChart_reflectance.csv",
+                i - 1,
+                Clamp,
+                "1",
+            ));
+            v.push((
+                format!("mcc-{i:02}"),
+                "data/surfaces/macbethChart_reflectance.csv",
+                i - 1,
+                Clamp,
+                "1",
+            ));
             v.push((
                 format!("mcc-iso-{i:02}"),
                 "data/surfaces/macbeth_colorchecker_ohta_iso17321_380-780_5nm.csv",
@@ -106,10 +259,15 @@ fn table(path: &str) -> &'static SpectralTable {
     let all = T.get_or_init(|| {
         FILES
             .iter()
-            .map(|f| SpectralTable::parse(f.text, f.path).expect("embedded spectral data must parse"))
+            .map(|f| {
+                SpectralTable::parse(f.text, f.path).expect("embedded spectral data must parse")
+            })
             .collect()
     });
-    let i = FILES.iter().position(|f| f.path == path).expect("embedded file is listed");
+    let i = FILES
+        .iter()
+        .position(|f| f.path == path)
+        .expect("embedded file is listed");
     &all[i]
 }
 
@@ -127,7 +285,9 @@ pub fn named(name: &str) -> Result<Spectrum, String> {
         return Ok(Spectrum::constant("one", 1.0));
     }
     if let Some(v) = name.strip_prefix("constant:") {
-        let x: f64 = v.parse().map_err(|_| format!("'{name}': expected constant:<number>"))?;
+        let x: f64 = v
+            .parse()
+            .map_err(|_| format!("'{name}': expected constant:<number>"))?;
         if !x.is_finite() {
             return Err(format!("'{name}': constant must be finite"));
         }
@@ -168,7 +328,13 @@ pub fn resolve(reference: &str, base_dir: &Path) -> Result<Spectrum, String> {
 /// CIE 1931 2° colour-matching functions x̄, ȳ, z̄.
 pub fn cie1931_cmfs() -> &'static [Spectrum; 3] {
     static C: OnceLock<[Spectrum; 3]> = OnceLock::new();
-    C.get_or_init(|| [named("cie1931-x").unwrap(), named("cie1931-y").unwrap(), named("cie1931-z").unwrap()])
+    C.get_or_init(|| {
+        [
+            named("cie1931-x").unwrap(),
+            named("cie1931-y").unwrap(),
+            named("cie1931-z").unwrap(),
+        ]
+    })
 }
 
 #[cfg(test)]
@@ -182,7 +348,11 @@ mod tests {
         }
         let lamp = named("cbox-lamp").unwrap();
         // README: peak ≈3.9e-3 W/(sr·m²·nm) at 615 nm
-        let (i, peak) = lamp.values.iter().enumerate().fold((0, 0.0), |a, (i, &v)| if v > a.1 { (i, v) } else { a });
+        let (i, peak) = lamp
+            .values
+            .iter()
+            .enumerate()
+            .fold((0, 0.0), |a, (i, &v)| if v > a.1 { (i, v) } else { a });
         assert!((peak - 3.9e-3).abs() < 0.2e-3, "{peak}");
         assert!((lamp.wavelengths_nm[i] - 615.0).abs() <= 10.0);
     }

@@ -23,7 +23,11 @@ pub struct WavelengthGrid {
 
 impl Default for WavelengthGrid {
     fn default() -> Self {
-        Self { start_nm: 400.0, step_nm: 10.0, count: 31 }
+        Self {
+            start_nm: 400.0,
+            step_nm: 10.0,
+            count: 31,
+        }
     }
 }
 
@@ -41,13 +45,21 @@ impl WavelengthGrid {
             return Err(format!("wavelength step must be > 0 nm, got {step_nm}"));
         }
         if stop_nm < start_nm {
-            return Err(format!("wavelength stop {stop_nm} nm is below start {start_nm} nm"));
+            return Err(format!(
+                "wavelength stop {stop_nm} nm is below start {start_nm} nm"
+            ));
         }
         let n = ((stop_nm - start_nm) / step_nm + 1e-9).floor() as usize + 1;
         if n > 10_000 {
-            return Err(format!("wavelength grid has {n} samples; at most 10000 allowed"));
+            return Err(format!(
+                "wavelength grid has {n} samples; at most 10000 allowed"
+            ));
         }
-        Ok(Self { start_nm, step_nm, count: n })
+        Ok(Self {
+            start_nm,
+            step_nm,
+            count: n,
+        })
     }
     pub fn len(&self) -> usize {
         self.count
@@ -111,23 +123,43 @@ pub struct Spectrum {
 }
 
 impl Spectrum {
-    pub fn new(name: impl Into<String>, wavelengths_nm: Vec<f64>, values: Vec<f64>) -> Result<Self, String> {
+    pub fn new(
+        name: impl Into<String>,
+        wavelengths_nm: Vec<f64>,
+        values: Vec<f64>,
+    ) -> Result<Self, String> {
         let name = name.into();
         if wavelengths_nm.len() != values.len() {
-            return Err(format!("spectrum '{name}': {} wavelengths but {} values", wavelengths_nm.len(), values.len()));
+            return Err(format!(
+                "spectrum '{name}': {} wavelengths but {} values",
+                wavelengths_nm.len(),
+                values.len()
+            ));
         }
         if wavelengths_nm.is_empty() {
             return Err(format!("spectrum '{name}' has no samples"));
         }
         for (i, (&w, &v)) in wavelengths_nm.iter().zip(&values).enumerate() {
             if !w.is_finite() || !v.is_finite() {
-                return Err(format!("spectrum '{name}': sample {i} is not finite ({w} nm, {v})"));
+                return Err(format!(
+                    "spectrum '{name}': sample {i} is not finite ({w} nm, {v})"
+                ));
             }
             if i > 0 && w <= wavelengths_nm[i - 1] {
-                return Err(format!("spectrum '{name}': wavelengths must increase ({} then {w} nm)", wavelengths_nm[i - 1]));
+                return Err(format!(
+                    "spectrum '{name}': wavelengths must increase ({} then {w} nm)",
+                    wavelengths_nm[i - 1]
+                ));
             }
         }
-        Ok(Self { name, wavelengths_nm, values, interpolation: Interpolation::Linear, extrapolation: Extrapolation::Zero, unit: "1".into() })
+        Ok(Self {
+            name,
+            wavelengths_nm,
+            values,
+            interpolation: Interpolation::Linear,
+            extrapolation: Extrapolation::Zero,
+            unit: "1".into(),
+        })
     }
     pub fn constant(name: impl Into<String>, value: f64) -> Self {
         Self {
@@ -170,7 +202,9 @@ impl Spectrum {
                 Extrapolation::Clamp => Ok(if lambda_nm < w[0] { v[0] } else { v[n - 1] }),
                 Extrapolation::Error => Err(format!(
                     "spectrum '{}' is defined on {}–{} nm, asked for {lambda_nm} nm",
-                    self.name, w[0], w[n - 1]
+                    self.name,
+                    w[0],
+                    w[n - 1]
                 )),
             };
         }
@@ -203,7 +237,9 @@ impl Spectrum {
     }
     /// Point samples on a grid.
     pub fn resample(&self, grid: &WavelengthGrid) -> Result<Vec<f64>, String> {
-        (0..grid.len()).map(|i| self.try_eval(grid.wavelength(i))).collect()
+        (0..grid.len())
+            .map(|i| self.try_eval(grid.wavelength(i)))
+            .collect()
     }
     /// Trapezoid integral of self(λ)·other(λ) over a grid, in value-units × nm.
     pub fn integrate_product(&self, other: &Spectrum, grid: &WavelengthGrid) -> f64 {
@@ -220,7 +256,11 @@ impl Spectrum {
 /// units of the SPD × nm). Uses the shipped CIE 1931 2° CMFs.
 pub fn xyz(spd: &Spectrum, grid: &WavelengthGrid) -> [f64; 3] {
     let cmf = library::cie1931_cmfs();
-    [spd.integrate_product(&cmf[0], grid), spd.integrate_product(&cmf[1], grid), spd.integrate_product(&cmf[2], grid)]
+    [
+        spd.integrate_product(&cmf[0], grid),
+        spd.integrate_product(&cmf[1], grid),
+        spd.integrate_product(&cmf[2], grid),
+    ]
 }
 
 /// CIE xy chromaticity of an SPD.
