@@ -12,7 +12,10 @@ use std::path::Path;
 use std::process::{Command, Output};
 
 fn camsim(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_camsim")).args(args).output().unwrap()
+    Command::new(env!("CARGO_BIN_EXE_camsim"))
+        .args(args)
+        .output()
+        .unwrap()
 }
 
 fn stderr(o: &Output) -> String {
@@ -24,7 +27,8 @@ fn stderr(o: &Output) -> String {
 fn erf(x: f64) -> f64 {
     let t = 1.0 / (1.0 + 0.3275911 * x.abs());
     let y = 1.0
-        - (((((1.061405429 * t - 1.453152027) * t) + 1.421413741) * t - 0.284496736) * t + 0.254829592)
+        - (((((1.061405429 * t - 1.453152027) * t) + 1.421413741) * t - 0.284496736) * t
+            + 0.254829592)
             * t
             * (-x * x).exp();
     if x >= 0.0 { y } else { -y }
@@ -33,7 +37,11 @@ fn erf(x: f64) -> f64 {
 fn write_png16(path: &Path, w: u32, h: u32, channels: usize, data: &[u16]) {
     let f = std::fs::File::create(path).unwrap();
     let mut e = png::Encoder::new(std::io::BufWriter::new(f), w, h);
-    e.set_color(if channels == 1 { png::ColorType::Grayscale } else { png::ColorType::Rgb });
+    e.set_color(if channels == 1 {
+        png::ColorType::Grayscale
+    } else {
+        png::ColorType::Rgb
+    });
     e.set_depth(png::BitDepth::Sixteen);
     let mut wr = e.write_header().unwrap();
     let bytes: Vec<u8> = data.iter().flat_map(|v| v.to_be_bytes()).collect();
@@ -63,7 +71,10 @@ const ROI: (u32, u32, u32, u32) = (24, 8, 64, 128);
 fn slanted_edge_png(path: &Path) {
     let (w, h) = (120u32, 150u32);
     let (t, c) = (ANGLE_DEG.to_radians().tan(), ANGLE_DEG.to_radians().cos());
-    let (x0, y0) = (ROI.0 as f64 + ROI.2 as f64 / 2.0, ROI.1 as f64 + ROI.3 as f64 / 2.0);
+    let (x0, y0) = (
+        ROI.0 as f64 + ROI.2 as f64 / 2.0,
+        ROI.1 as f64 + ROI.3 as f64 / 2.0,
+    );
     let (dark, bright) = (6000.0, 52000.0);
     let n = 32;
     let mut data = vec![0u16; (w * h) as usize];
@@ -96,7 +107,13 @@ fn slanted_edge_png(path: &Path) {
 /// `src/measure/sfr.rs`): Gaussian × pixel aperture projected on the edge
 /// normal × the ¼-px binning box.
 fn analytic_mtf(f: f64) -> f64 {
-    let sinc = |x: f64| if x == 0.0 { 1.0 } else { (std::f64::consts::PI * x).sin() / (std::f64::consts::PI * x) };
+    let sinc = |x: f64| {
+        if x == 0.0 {
+            1.0
+        } else {
+            (std::f64::consts::PI * x).sin() / (std::f64::consts::PI * x)
+        }
+    };
     let a = ANGLE_DEG.to_radians();
     (-2.0 * std::f64::consts::PI.powi(2) * SIGMA_PX * SIGMA_PX * f * f).exp()
         * sinc(f * a.cos())
@@ -108,7 +125,11 @@ fn analytic_mtf50() -> f64 {
     let (mut lo, mut hi) = (0.0, 1.0);
     for _ in 0..60 {
         let m = 0.5 * (lo + hi);
-        if analytic_mtf(m) > 0.5 { lo = m } else { hi = m }
+        if analytic_mtf(m) > 0.5 {
+            lo = m
+        } else {
+            hi = m
+        }
     }
     0.5 * (lo + hi)
 }
@@ -122,7 +143,11 @@ fn mcc_capture(dir: &Path, file: &str, scale: f64) {
     let mut labels = vec![0u8; (w * h) as usize];
     for k in 1..=24u32 {
         let (cx, cy) = ((k - 1) % 6, (k - 1) / 6);
-        let v = [1000.0 * k as f64, 2000.0 + 500.0 * k as f64, 30000.0 - 1000.0 * k as f64];
+        let v = [
+            1000.0 * k as f64,
+            2000.0 + 500.0 * k as f64,
+            30000.0 - 1000.0 * k as f64,
+        ];
         for y in cy * 11 + 1..cy * 11 + 11 {
             for x in cx * 11 + 1..cx * 11 + 11 {
                 let i = (y * w + x) as usize;
@@ -144,11 +169,23 @@ fn results(p: &Path) -> Vec<(String, String, String, f64, f64)> {
     let mut r = csv::Reader::from_path(p).unwrap();
     let h = r.headers().unwrap().clone();
     let col = |n: &str| h.iter().position(|x| x == n).unwrap();
-    let (m, q, u, v, s) = (col("measurement"), col("quantity"), col("unit"), col("value"), col("stderr"));
+    let (m, q, u, v, s) = (
+        col("measurement"),
+        col("quantity"),
+        col("unit"),
+        col("value"),
+        col("stderr"),
+    );
     r.records()
         .map(|x| {
             let x = x.unwrap();
-            (x[m].to_string(), x[q].to_string(), x[u].to_string(), x[v].parse().unwrap(), x[s].parse().unwrap())
+            (
+                x[m].to_string(),
+                x[q].to_string(),
+                x[u].to_string(),
+                x[v].parse().unwrap(),
+                x[s].parse().unwrap(),
+            )
         })
         .collect()
 }
@@ -167,7 +204,11 @@ fn captured_edge_and_chart_measured_without_rendering() {
     std::fs::create_dir(d.join("captures")).unwrap();
     slanted_edge_png(&d.join("captures/edge_near.png"));
     mcc_capture(&d.join("captures"), "mcc_a.png", 1.0);
-    std::fs::copy(d.join("captures/labels.png"), d.join("captures/labels_a.png")).unwrap();
+    std::fs::copy(
+        d.join("captures/labels.png"),
+        d.join("captures/labels_a.png"),
+    )
+    .unwrap();
     mcc_capture(&d.join("captures"), "mcc_b.png", 1.1);
     let exp = d.join("exp.kdl");
     std::fs::write(
@@ -196,7 +237,10 @@ fn captured_edge_and_chart_measured_without_rendering() {
     assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
     let rows = results(&out.join("captures/results.csv"));
     // No scene, lens or sensor: nothing was rendered.
-    assert!(!out.join("captures/previews").exists(), "a measured-only experiment renders nothing");
+    assert!(
+        !out.join("captures/previews").exists(),
+        "a measured-only experiment renders nothing"
+    );
     assert!(t.elapsed().as_secs_f64() < 10.0);
 
     // SFR: MTF50 within 1.5 % of the analytic value (the SFR module meets 1 %
@@ -204,17 +248,33 @@ fn captured_edge_and_chart_measured_without_rendering() {
     let truth = analytic_mtf50();
     let (m50, se) = get(&rows, "sfr-measured", "capture-near/mtf50");
     eprintln!("MTF50 measured {m50} ± {se} cy/px, analytic {truth}");
-    assert!((m50 / truth - 1.0).abs() < 0.015, "MTF50 {m50} ± {se} vs analytic {truth}");
+    assert!(
+        (m50 / truth - 1.0).abs() < 0.015,
+        "MTF50 {m50} ± {se} vs analytic {truth}"
+    );
     let (m50mm, _) = get(&rows, "sfr-measured", "capture-near/mtf50_mm");
-    assert!((m50mm - m50 / 1.4e-3).abs() < 1e-6 * m50mm, "cy/mm from pixel-um=1.4");
+    assert!(
+        (m50mm - m50 / 1.4e-3).abs() < 1e-6 * m50mm,
+        "cy/mm from pixel-um=1.4"
+    );
     let (ang, _) = get(&rows, "sfr-measured", "capture-near/edge_angle");
     assert!((ang.abs() - ANGLE_DEG).abs() < 0.1, "edge angle {ang}");
     let (m25, se25) = get(&rows, "sfr-measured", "capture-near/mtf@0.25cy/px");
-    assert!((m25 - analytic_mtf(0.25)).abs() < 0.01, "MTF(0.25) {m25} ± {se25} vs {}", analytic_mtf(0.25));
+    assert!(
+        (m25 - analytic_mtf(0.25)).abs() < 0.01,
+        "MTF(0.25) {m25} ± {se25} vs {}",
+        analytic_mtf(0.25)
+    );
 
     // MCC patch means of the captures: exact (uniform patches).
-    assert_eq!(get(&rows, "mcc-a", "patch07/g_mean").0, 2000.0 + 500.0 * 7.0);
-    assert_eq!(get(&rows, "mcc-b", "patch07/g_mean").0, (1.1 * (2000.0 + 500.0 * 7.0f64)).round());
+    assert_eq!(
+        get(&rows, "mcc-a", "patch07/g_mean").0,
+        2000.0 + 500.0 * 7.0
+    );
+    assert_eq!(
+        get(&rows, "mcc-b", "patch07/g_mean").0,
+        (1.1 * (2000.0 + 500.0 * 7.0f64)).round()
+    );
 
     // compare: simulated a against reference b = 1.1·a. Every pair's % error is
     // |a − 1.1a| / 1.1a = 1/11; the slope through the origin is 1/1.1.
@@ -249,7 +309,10 @@ fn missing_capture_and_unknown_input_are_located_errors() {
         (
             "experiment \"x\" {\n    measured \"capture-near\" file=\"edge.png\"\n    measure \"sfr\" input=\"capture-nera\" roi-px=(0 0 8 8)\n}\n",
             "3:25",
-            &["unknown measured input 'capture-nera'", "did you mean 'capture-near'?"],
+            &[
+                "unknown measured input 'capture-nera'",
+                "did you mean 'capture-near'?",
+            ],
         ),
         // sfr on a capture without roi-px
         (
@@ -288,7 +351,10 @@ fn missing_capture_and_unknown_input_are_located_errors() {
         let o = camsim(&["check", p.to_str().unwrap()]);
         let e = stderr(&o);
         assert_eq!(o.status.code(), Some(1), "case {i}: {e}");
-        assert!(e.contains(&format!("case{i}.kdl:{at}:")), "case {i}: expected at {at}: {e}");
+        assert!(
+            e.contains(&format!("case{i}.kdl:{at}:")),
+            "case {i}: expected at {at}: {e}"
+        );
         for n in *needles {
             assert!(e.contains(n), "case {i}: expected '{n}' in: {e}");
         }
@@ -315,11 +381,21 @@ fn compare_pairs_figures_by_quantity_and_unit() {
     // sim = reference + (+3, −4): RMSE = √((9 + 16)/2) = √12.5; a figure only
     // in one of them, or in another unit, is not paired.
     let sim = Measured {
-        figures: vec![fig("a", 103.0), fig("b", 196.0), fig("only-sim", 5.0), Figure::new("m", "c", "%", 1.0, 0.0)],
+        figures: vec![
+            fig("a", 103.0),
+            fig("b", 196.0),
+            fig("only-sim", 5.0),
+            Figure::new("m", "c", "%", 1.0, 0.0),
+        ],
         ..Default::default()
     };
     let reference = Measured {
-        figures: vec![fig("b", 200.0), fig("a", 100.0), fig("only-ref", 7.0), Figure::new("m", "c", "1", 1.0, 0.0)],
+        figures: vec![
+            fig("b", 200.0),
+            fig("a", 100.0),
+            fig("only-ref", 7.0),
+            Figure::new("m", "c", "1", 1.0, 0.0),
+        ],
         ..Default::default()
     };
     let r = measured::compare(&m, &sim, &reference).unwrap();
@@ -331,8 +407,13 @@ fn compare_pairs_figures_by_quantity_and_unit() {
     assert_eq!(r.curves[0].x, vec![100.0, 200.0]);
     assert_eq!(r.curves[0].y, vec![103.0, 196.0]);
     // One shared figure is too few.
-    let one = Measured { figures: vec![fig("a", 1.0)], ..Default::default() };
-    let e = measured::compare(&m, &one, &reference).unwrap_err().to_string();
+    let one = Measured {
+        figures: vec![fig("a", 1.0)],
+        ..Default::default()
+    };
+    let e = measured::compare(&m, &one, &reference)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("at least 2"), "{e}");
 }
 
@@ -342,8 +423,14 @@ fn tiny_cornell_box(dir: &Path) {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cornell-box.kdl");
     let text = std::fs::read_to_string(src).unwrap();
     assert!(text.contains("film width-px=320 height-px=240"));
-    std::fs::write(dir.join("tiny.kdl"), text.replace("film width-px=320 height-px=240", "film width-px=48 height-px=36"))
-        .unwrap();
+    std::fs::write(
+        dir.join("tiny.kdl"),
+        text.replace(
+            "film width-px=320 height-px=240",
+            "film width-px=48 height-px=36",
+        ),
+    )
+    .unwrap();
 }
 
 #[test]
@@ -373,9 +460,16 @@ fn convergence_renders_each_spp_and_follows_the_figures() {
         let (_, e_se) = get(&rows, "convergence", "ri@max/error_at_longest");
         assert_eq!(e_se, get(&rows, "convergence", "ri@max/spp16_stderr").0);
         // quantity="ri@max" follows only that figure.
-        assert!(!rows.iter().any(|r| r.0 == "convergence" && r.1.starts_with("ri@half")));
-        let curves = std::fs::read_to_string(out.join("conv/curves/default/convergence.csv")).unwrap();
-        assert!(curves.contains("ri@max/stderr_vs_time") && curves.contains("ri@max/error_vs_time"));
+        assert!(
+            !rows
+                .iter()
+                .any(|r| r.0 == "convergence" && r.1.starts_with("ri@half"))
+        );
+        let curves =
+            std::fs::read_to_string(out.join("conv/curves/default/convergence.csv")).unwrap();
+        assert!(
+            curves.contains("ri@max/stderr_vs_time") && curves.contains("ri@max/error_vs_time")
+        );
         // Everything but the timings is reproducible.
         all.push(
             rows.into_iter()

@@ -51,7 +51,10 @@ pub const INPUT_KINDS: &[&str] = &["sfr", "mcc", "profile", "noise", "ri"];
 const CONVERGENCE_KINDS: &[&str] = &["sfr", "mcc", "profile", "noise", "ri"];
 
 /// The measured input called `name`, or an error with a did-you-mean.
-pub fn check_input_name<'a>(spec: &'a ResolvedExperiment, name: &str) -> Result<&'a MeasuredInput, ApplyError> {
+pub fn check_input_name<'a>(
+    spec: &'a ResolvedExperiment,
+    name: &str,
+) -> Result<&'a MeasuredInput, ApplyError> {
     if let Some(c) = spec.measured_input(name) {
         return Ok(c);
     }
@@ -59,7 +62,10 @@ pub fn check_input_name<'a>(spec: &'a ResolvedExperiment, name: &str) -> Result<
     let mut e = ApplyError::new(if names.is_empty() {
         format!("unknown measured input '{name}': the experiment names no captured images")
     } else {
-        format!("unknown measured input '{name}'; expected one of: {}", names.join(", "))
+        format!(
+            "unknown measured input '{name}'; expected one of: {}",
+            names.join(", ")
+        )
     });
     e.help = crate::diag::did_you_mean(name, names.iter().copied())
         .map(|s| format!("did you mean '{s}'?"))
@@ -70,8 +76,11 @@ pub fn check_input_name<'a>(spec: &'a ResolvedExperiment, name: &str) -> Result<
 /// `roi-px=(x y w h)`: non-negative integers, w and h ≥ 1.
 pub fn roi_px(v: &Value) -> Result<Rect, ApplyError> {
     let bad = || {
-        ApplyError::new(format!("'roi-px': expected (x y w h) in pixels, found {}", describe(v)))
-            .help("e.g. roi-px=(100 80 64 128): left, top, width, height")
+        ApplyError::new(format!(
+            "'roi-px': expected (x y w h) in pixels, found {}",
+            describe(v)
+        ))
+        .help("e.g. roi-px=(100 80 64 128): left, top, width, height")
     };
     let Value::List(l) = v else { return Err(bad()) };
     if l.len() != 4 {
@@ -82,7 +91,9 @@ pub fn roi_px(v: &Value) -> Result<Rect, ApplyError> {
         *o = as_int(e, "roi-px", 0, u32::MAX as u64)? as u32;
     }
     if x[2] == 0 || x[3] == 0 {
-        return Err(ApplyError::new("'roi-px': width and height must be ≥ 1").help("roi-px=(x y w h)"));
+        return Err(
+            ApplyError::new("'roi-px': width and height must be ≥ 1").help("roi-px=(x y w h)")
+        );
     }
     Ok(Rect::new(x[0], x[1], x[2], x[3]))
 }
@@ -111,23 +122,31 @@ pub fn check_references(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyErr
                 roi_px(r).map_err(|e| (at("roi-px"), e))?;
             }
             let labelled = c.labels.is_some();
-            let need = |msg: String, help: &str| Err((at("input"), ApplyError::new(msg).help(help)));
+            let need =
+                |msg: String, help: &str| Err((at("input"), ApplyError::new(msg).help(help)));
             match m.kind.as_str() {
                 "sfr" if m.params.get("roi-px").is_none() && (m.of.is_empty() || !labelled) => {
                     return need(
-                        format!("sfr on the captured image '{name}' needs roi-px=(x y w h) around the edge"),
+                        format!(
+                            "sfr on the captured image '{name}' needs roi-px=(x y w h) around the edge"
+                        ),
                         "captures carry no object labels; or give the capture labels=… names=… and of=\"<object>\"",
                     );
                 }
                 "mcc" | "profile" if !labelled => {
                     return need(
-                        format!("{} on the captured image '{name}' needs its label map", m.kind),
+                        format!(
+                            "{} on the captured image '{name}' needs its label map",
+                            m.kind
+                        ),
                         "add labels=\"labels.png\" names=\"names.txt\" to the measured node",
                     );
                 }
                 "noise" if m.params.get("conversion-gain-dv-e").is_none() => {
                     return need(
-                        format!("noise on the captured image '{name}' needs conversion-gain-dv-e=…"),
+                        format!(
+                            "noise on the captured image '{name}' needs conversion-gain-dv-e=…"
+                        ),
                         "the camera's conversion gain in DV per electron (Appendix IV's Poisson test)",
                     );
                 }
@@ -139,15 +158,24 @@ pub fn check_references(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyErr
                 const KNOWN: &[&str] = &["reference", "quantity", "normalize"];
                 if let Some(u) = m.params.unknown(KNOWN).first() {
                     let e = crate::experiment::hooks::ParamError::unknown(u, KNOWN);
-                    return Err((name_at(u), ApplyError { message: e.message, help: e.help, on_path: false }));
+                    return Err((
+                        name_at(u),
+                        ApplyError {
+                            message: e.message,
+                            help: e.help,
+                            on_path: false,
+                        },
+                    ));
                 }
                 let of = match m.of.as_slice() {
                     [one] => one.as_str(),
                     _ => {
                         return Err((
                             at("of"),
-                            ApplyError::new("compare needs of=\"<measurement>\" (one simulated measurement)")
-                                .help("e.g. measure \"compare\" of=\"mcc\" reference=\"mcc-measured\""),
+                            ApplyError::new(
+                                "compare needs of=\"<measurement>\" (one simulated measurement)",
+                            )
+                            .help("e.g. measure \"compare\" of=\"mcc\" reference=\"mcc-measured\""),
                         ));
                     }
                 };
@@ -164,12 +192,20 @@ pub fn check_references(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyErr
                 };
                 check_measurement_ref(spec, m, r).map_err(|e| (at("reference"), e))?;
                 if r == of {
-                    return Err((at("reference"), ApplyError::new("compare: of and reference name the same measurement")));
+                    return Err((
+                        at("reference"),
+                        ApplyError::new("compare: of and reference name the same measurement"),
+                    ));
                 }
                 if let Some(v) = m.params.get("normalize") {
                     let s = as_str(v, "normalize").map_err(|e| (at("normalize"), e))?;
                     if !matches!(s, "none" | "mean") {
-                        return Err((at("normalize"), ApplyError::new(format!("normalize: expected \"none\" or \"mean\", found \"{s}\""))));
+                        return Err((
+                            at("normalize"),
+                            ApplyError::new(format!(
+                                "normalize: expected \"none\" or \"mean\", found \"{s}\""
+                            )),
+                        ));
                     }
                 }
                 if let Some(v) = m.params.get("quantity") {
@@ -180,7 +216,14 @@ pub fn check_references(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyErr
                 const KNOWN: &[&str] = &["spp", "reference-spp", "quantity"];
                 if let Some(u) = m.params.unknown(KNOWN).first() {
                     let e = crate::experiment::hooks::ParamError::unknown(u, KNOWN);
-                    return Err((name_at(u), ApplyError { message: e.message, help: e.help, on_path: false }));
+                    return Err((
+                        name_at(u),
+                        ApplyError {
+                            message: e.message,
+                            help: e.help,
+                            on_path: false,
+                        },
+                    ));
                 }
                 let of = match m.of.as_slice() {
                     [one] => one.as_str(),
@@ -193,20 +236,26 @@ pub fn check_references(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyErr
                     }
                 };
                 let t = check_measurement_ref(spec, m, of).map_err(|e| (at("of"), e))?;
-                if !CONVERGENCE_KINDS.contains(&t.kind.as_str()) || t.params.get("input").is_some() {
+                if !CONVERGENCE_KINDS.contains(&t.kind.as_str()) || t.params.get("input").is_some()
+                {
                     return Err((
                         at("of"),
                         ApplyError::new(format!(
                             "convergence follows a rendered measurement ({}); '{of}' is a '{}'{}",
                             CONVERGENCE_KINDS.join(", "),
                             t.kind,
-                            if t.params.get("input").is_some() { " of a captured image" } else { "" }
+                            if t.params.get("input").is_some() {
+                                " of a captured image"
+                            } else {
+                                ""
+                            }
                         )),
                     ));
                 }
                 spp_list(m).map_err(|e| (at("spp"), e))?;
                 if let Some(v) = m.params.get("reference-spp") {
-                    as_int(v, "reference-spp", 1, 1_000_000_000).map_err(|e| (at("reference-spp"), e))?;
+                    as_int(v, "reference-spp", 1, 1_000_000_000)
+                        .map_err(|e| (at("reference-spp"), e))?;
                 }
                 if let Some(v) = m.params.get("quantity") {
                     as_str(v, "quantity").map_err(|e| (at("quantity"), e))?;
@@ -219,20 +268,36 @@ pub fn check_references(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyErr
 }
 
 /// Another measurement of the experiment named `name` (not `m`, not a compare/convergence).
-fn check_measurement_ref<'a>(spec: &'a ResolvedExperiment, m: &Measure, name: &str) -> Result<&'a Measure, ApplyError> {
-    let others: Vec<&str> = spec.measures.iter().filter(|x| x.name != m.name).map(|x| x.name.as_str()).collect();
-    match spec.measures.iter().find(|x| x.name == name && x.name != m.name) {
-        Some(t) if matches!(t.kind.as_str(), "compare" | "convergence") => Err(ApplyError::new(format!(
-            "'{name}' is a '{}' measurement; {} refers to a measurement of an image",
-            t.kind, m.kind
-        ))),
+fn check_measurement_ref<'a>(
+    spec: &'a ResolvedExperiment,
+    m: &Measure,
+    name: &str,
+) -> Result<&'a Measure, ApplyError> {
+    let others: Vec<&str> = spec
+        .measures
+        .iter()
+        .filter(|x| x.name != m.name)
+        .map(|x| x.name.as_str())
+        .collect();
+    match spec
+        .measures
+        .iter()
+        .find(|x| x.name == name && x.name != m.name)
+    {
+        Some(t) if matches!(t.kind.as_str(), "compare" | "convergence") => {
+            Err(ApplyError::new(format!(
+                "'{name}' is a '{}' measurement; {} refers to a measurement of an image",
+                t.kind, m.kind
+            )))
+        }
         Some(t) => Ok(t),
         None => {
             let mut e = ApplyError::new(format!(
                 "no measurement named '{name}' in this experiment; names: {}",
                 others.join(", ")
             ));
-            e.help = crate::diag::did_you_mean(name, others.iter().copied()).map(|s| format!("did you mean '{s}'?"));
+            e.help = crate::diag::did_you_mean(name, others.iter().copied())
+                .map(|s| format!("did you mean '{s}'?"));
             Err(e)
         }
     }
@@ -241,14 +306,29 @@ fn check_measurement_ref<'a>(spec: &'a ResolvedExperiment, m: &Measure, name: &s
 /// `spp=(16 64 256)`: at least two strictly increasing sample counts.
 fn spp_list(m: &Measure) -> Result<Vec<u64>, ApplyError> {
     let help = "e.g. spp=(16 64 256): at least two increasing sample counts";
-    let v = m.params.get("spp").ok_or_else(|| ApplyError::new("convergence needs spp=(…)").help(help))?;
+    let v = m
+        .params
+        .get("spp")
+        .ok_or_else(|| ApplyError::new("convergence needs spp=(…)").help(help))?;
     let l = match v {
         Value::List(l) => l.clone(),
-        other => return Err(ApplyError::new(format!("'spp': expected a list of sample counts, found {}", describe(other))).help(help)),
+        other => {
+            return Err(ApplyError::new(format!(
+                "'spp': expected a list of sample counts, found {}",
+                describe(other)
+            ))
+            .help(help));
+        }
     };
-    let s: Vec<u64> = l.iter().map(|x| as_int(x, "spp", 1, 1_000_000_000)).collect::<Result<_, _>>()?;
+    let s: Vec<u64> = l
+        .iter()
+        .map(|x| as_int(x, "spp", 1, 1_000_000_000))
+        .collect::<Result<_, _>>()?;
     if s.len() < 2 || s.windows(2).any(|w| w[1] <= w[0]) {
-        return Err(ApplyError::new("'spp': expected at least two strictly increasing sample counts").help(help));
+        return Err(ApplyError::new(
+            "'spp': expected at least two strictly increasing sample counts",
+        )
+        .help(help));
     }
     Ok(s)
 }
@@ -291,7 +371,11 @@ pub fn load_capture(c: &MeasuredInput) -> Result<Capture> {
         }
         _ => None,
     };
-    Ok(Capture { image, labels, pixel_pitch_m: c.pixel_um.map(|p| p * 1e-6) })
+    Ok(Capture {
+        image,
+        labels,
+        pixel_pitch_m: c.pixel_um.map(|p| p * 1e-6),
+    })
 }
 
 fn prefixed(mut m: Measured, p: &str) -> Measured {
@@ -305,19 +389,34 @@ fn prefixed(mut m: Measured, p: &str) -> Measured {
 }
 
 /// Run measurement `m` on the captured image `cap` (called `input`).
-pub fn measure_capture(m: &Measure, spec: &ResolvedExperiment, input: &str, cap: &Capture) -> Result<Measured> {
+pub fn measure_capture(
+    m: &Measure,
+    spec: &ResolvedExperiment,
+    input: &str,
+    cap: &Capture,
+) -> Result<Measured> {
     let img = &cap.image;
     let err = |e: Error| Error::io(&img.path, e);
     let str_param = |k: &str, d: &'static str| -> Result<String> {
-        Ok(m.params.str(k).map_err(Error::invalid)?.unwrap_or(d).to_string())
+        Ok(m.params
+            .str(k)
+            .map_err(Error::invalid)?
+            .unwrap_or(d)
+            .to_string())
     };
     let roi = match m.params.get("roi-px") {
-        Some(v) => Some(roi_px(v).map_err(|e| Error::invalid(format!("measurement '{}': {}", m.name, e.message)))?),
+        Some(v) => Some(
+            roi_px(v)
+                .map_err(|e| Error::invalid(format!("measurement '{}': {}", m.name, e.message)))?,
+        ),
         None => None,
     };
     let views_labels = || -> Result<&(Vec<u32>, Vec<String>)> {
         cap.labels.as_ref().ok_or_else(|| {
-            Error::invalid(format!("measurement '{}': the captured image '{input}' has no label map", m.name))
+            Error::invalid(format!(
+                "measurement '{}': the captured image '{input}' has no label map",
+                m.name
+            ))
         })
     };
     match m.kind.as_str() {
@@ -335,7 +434,10 @@ pub fn measure_capture(m: &Measure, spec: &ResolvedExperiment, input: &str, cap:
                 None => {
                     let (labels, names) = views_labels()?;
                     for o in &m.of {
-                        let r = crate::measure::sfr::object_roi(labels, names, img.width, img.height, o).map_err(err)?;
+                        let r = crate::measure::sfr::object_roi(
+                            labels, names, img.width, img.height, o,
+                        )
+                        .map_err(err)?;
                         regions.push((o.clone(), r));
                     }
                 }
@@ -353,7 +455,9 @@ pub fn measure_capture(m: &Measure, spec: &ResolvedExperiment, input: &str, cap:
         "mcc" => {
             let (labels, names) = views_labels()?;
             let chart = m.of.first().map(String::as_str).unwrap_or("mcc");
-            let patches = crate::measure::mcc::patch_means(&img.views(), labels, names, chart, 0.25).map_err(err)?;
+            let patches =
+                crate::measure::mcc::patch_means(&img.views(), labels, names, chart, 0.25)
+                    .map_err(err)?;
             Ok(crate::measure::mcc::measured(&patches, &m.name))
         }
         "profile" => {
@@ -362,7 +466,8 @@ pub fn measure_capture(m: &Measure, spec: &ResolvedExperiment, input: &str, cap:
                 step_px: if img.mosaic.is_some() { 2 } else { 1 },
                 ..Default::default()
             };
-            crate::measure::profile::profile(&img.views(), labels, names, &m.of, &opts, &m.name).map_err(err)
+            crate::measure::profile::profile(&img.views(), labels, names, &m.of, &opts, &m.name)
+                .map_err(err)
         }
         "noise" => {
             let channel = str_param("channel", "g")?;
@@ -381,15 +486,23 @@ pub fn measure_capture(m: &Measure, spec: &ResolvedExperiment, input: &str, cap:
                 channel,
                 ..Default::default()
             };
-            Ok(crate::measure::noise::measure(&plane, &opts, &m.name).map_err(err)?.0)
+            Ok(crate::measure::noise::measure(&plane, &opts, &m.name)
+                .map_err(err)?
+                .0)
         }
         "ri" => {
             let channel = str_param("channel", "g")?;
             let plane = img.plane_for(&channel)?;
-            let opts = crate::measure::ri::RiOptions { pixel_pitch_m: cap.pixel_pitch_m, channel, ..Default::default() };
+            let opts = crate::measure::ri::RiOptions {
+                pixel_pitch_m: cap.pixel_pitch_m,
+                channel,
+                ..Default::default()
+            };
             crate::measure::ri::relative_illumination(&plane, &opts, &m.name).map_err(err)
         }
-        k => Err(Error::invalid(format!("measurement '{k}' cannot read a captured image"))),
+        k => Err(Error::invalid(format!(
+            "measurement '{k}' cannot read a captured image"
+        ))),
     }
 }
 
@@ -397,13 +510,24 @@ pub fn measure_capture(m: &Measure, spec: &ResolvedExperiment, input: &str, cap:
 /// `reference` by quantity and unit, optionally filtered and normalised.
 pub fn compare(m: &Measure, of: &Measured, reference: &Measured) -> Result<Measured> {
     let filter = m.params.str("quantity").map_err(Error::invalid)?;
-    let normalize = m.params.str("normalize").map_err(Error::invalid)?.unwrap_or("none");
+    let normalize = m
+        .params
+        .str("normalize")
+        .map_err(Error::invalid)?
+        .unwrap_or("none");
     let keep = |f: &&Figure| filter.is_none_or(|q| f.quantity.contains(q));
-    let refs: BTreeMap<&str, &Figure> = reference.figures.iter().filter(keep).map(|f| (f.quantity.as_str(), f)).collect();
+    let refs: BTreeMap<&str, &Figure> = reference
+        .figures
+        .iter()
+        .filter(keep)
+        .map(|f| (f.quantity.as_str(), f))
+        .collect();
     let mut pairs = vec![];
     let mut unit: Option<&str> = None;
     for f in of.figures.iter().filter(keep) {
-        let Some(r) = refs.get(f.quantity.as_str()) else { continue };
+        let Some(r) = refs.get(f.quantity.as_str()) else {
+            continue;
+        };
         if r.unit != f.unit {
             continue;
         }
@@ -417,7 +541,11 @@ pub fn compare(m: &Measure, of: &Measured, reference: &Measured) -> Result<Measu
             }
             _ => {}
         }
-        pairs.push(crate::measure::compare::Pair { name: f.quantity.clone(), simulated: f.value, reference: r.value });
+        pairs.push(crate::measure::compare::Pair {
+            name: f.quantity.clone(),
+            simulated: f.value,
+            reference: r.value,
+        });
     }
     if pairs.len() < 2 {
         return Err(Error::invalid(format!(
@@ -433,7 +561,10 @@ pub fn compare(m: &Measure, of: &Measured, reference: &Measured) -> Result<Measu
         let ms = pairs.iter().map(|p| p.simulated).sum::<f64>() / n;
         let mr = pairs.iter().map(|p| p.reference).sum::<f64>() / n;
         if ms == 0.0 || mr == 0.0 {
-            return Err(Error::invalid(format!("compare '{}': normalize=\"mean\" with a zero mean", m.name)));
+            return Err(Error::invalid(format!(
+                "compare '{}': normalize=\"mean\" with a zero mean",
+                m.name
+            )));
         }
         for p in &mut pairs {
             p.simulated /= ms;
@@ -442,7 +573,8 @@ pub fn compare(m: &Measure, of: &Measured, reference: &Measured) -> Result<Measu
         unit = "1".into();
     }
     let mut out = crate::measure::compare::compare(&pairs, &unit, &m.name)?;
-    out.figures.push(Figure::new(&m.name, "pairs", "1", pairs.len() as f64, 0.0));
+    out.figures
+        .push(Figure::new(&m.name, "pairs", "1", pairs.len() as f64, 0.0));
     Ok(out)
 }
 
@@ -451,7 +583,9 @@ pub fn compare(m: &Measure, of: &Measured, reference: &Measured) -> Result<Measu
 pub fn convergence(m: &Measure, spec: &ResolvedExperiment) -> Result<Measured> {
     let bad = |e: ApplyError| Error::invalid(format!("measurement '{}': {}", m.name, e.message));
     let spps = spp_list(m).map_err(bad)?;
-    let of = m.of.first().ok_or_else(|| Error::invalid("convergence needs of=\"<measurement>\""))?;
+    let of =
+        m.of.first()
+            .ok_or_else(|| Error::invalid("convergence needs of=\"<measurement>\""))?;
     let target = spec
         .measures
         .iter()
@@ -474,8 +608,15 @@ pub fn convergence(m: &Measure, spec: &ResolvedExperiment) -> Result<Measured> {
         let t = Instant::now();
         let oi = stages::render(&s, &scene, camera.as_ref())?;
         let dt = t.elapsed().as_secs_f64();
-        let si = if need.sensor_image { Some(stages::simulate_sensor(&s, &oi)?) } else { None };
-        Ok((stages::measure(target, &s, Some(&oi), si.as_ref())?.figures, dt))
+        let si = if need.sensor_image {
+            Some(stages::simulate_sensor(&s, &oi)?)
+        } else {
+            None
+        };
+        Ok((
+            stages::measure(target, &s, Some(&oi), si.as_ref())?.figures,
+            dt,
+        ))
     };
     let mut runs = vec![];
     for (k, &spp) in spps.iter().enumerate() {
@@ -487,7 +628,13 @@ pub fn convergence(m: &Measure, spec: &ResolvedExperiment) -> Result<Measured> {
     };
     let mut out = Measured::default();
     for (spp, (_, dt)) in &runs {
-        out.figures.push(Figure::new(&m.name, format!("spp{spp}/render_s"), "s", *dt, 0.0));
+        out.figures.push(Figure::new(
+            &m.name,
+            format!("spp{spp}/render_s"),
+            "s",
+            *dt,
+            0.0,
+        ));
     }
     let matches = |q: &str| filter.is_none_or(|f| q.contains(f));
     let mut followed = 0;
@@ -496,17 +643,40 @@ pub fn convergence(m: &Measure, spec: &ResolvedExperiment) -> Result<Measured> {
         let (spp_of, series): (Vec<u64>, Vec<crate::measure::convergence::Run>) = runs
             .iter()
             .filter_map(|(spp, (figs, dt))| {
-                let f = figs.iter().find(|f| &f.quantity == q && f.unit == f0.unit)?;
-                Some((*spp, crate::measure::convergence::Run { render_s: *dt, value: f.value, stderr: f.stderr }))
+                let f = figs
+                    .iter()
+                    .find(|f| &f.quantity == q && f.unit == f0.unit)?;
+                Some((
+                    *spp,
+                    crate::measure::convergence::Run {
+                        render_s: *dt,
+                        value: f.value,
+                        stderr: f.stderr,
+                    },
+                ))
             })
             .unzip();
-        if series.iter().filter(|r| r.stderr > 0.0 && r.render_s > 0.0).count() < 2 {
+        if series
+            .iter()
+            .filter(|r| r.stderr > 0.0 && r.render_s > 0.0)
+            .count()
+            < 2
+        {
             continue; // an exact figure (no standard error) has nothing to converge
         }
-        let rv = reference.as_ref().and_then(|r| r.iter().find(|f| &f.quantity == q)).map(|f| f.value);
+        let rv = reference
+            .as_ref()
+            .and_then(|r| r.iter().find(|f| &f.quantity == q))
+            .map(|f| f.value);
         let mut c = crate::measure::convergence::convergence(&series, rv, q, &f0.unit, &m.name)?;
         for (spp, r) in spp_of.iter().zip(&series) {
-            c.figures.push(Figure::new(&m.name, format!("{q}/spp{spp}_stderr"), &f0.unit, r.stderr, 0.0));
+            c.figures.push(Figure::new(
+                &m.name,
+                format!("{q}/spp{spp}_stderr"),
+                &f0.unit,
+                r.stderr,
+                0.0,
+            ));
         }
         for cv in &mut c.curves {
             cv.name = format!("{q}/{}", cv.name);
@@ -519,7 +689,9 @@ pub fn convergence(m: &Measure, spec: &ResolvedExperiment) -> Result<Measured> {
         return Err(Error::invalid(format!(
             "convergence '{}': no figure of '{of}'{} has a standard error in ≥ 2 runs",
             m.name,
-            filter.map(|q| format!(" matching quantity=\"{q}\"")).unwrap_or_default()
+            filter
+                .map(|q| format!(" matching quantity=\"{q}\""))
+                .unwrap_or_default()
         )));
     }
     Ok(out)
@@ -545,17 +717,26 @@ pub fn measure_all(
                         .iter()
                         .position(|x| x.name == name)
                         .and_then(|k| done[k].as_ref())
-                        .ok_or_else(|| Error::invalid(format!("compare '{}': no results of '{name}'", m.name)))
+                        .ok_or_else(|| {
+                            Error::invalid(format!("compare '{}': no results of '{name}'", m.name))
+                        })
                 };
                 let of = m.of.first().map(String::as_str).unwrap_or("");
-                let reference = m.params.str("reference").map_err(Error::invalid)?.unwrap_or("");
+                let reference = m
+                    .params
+                    .str("reference")
+                    .map_err(Error::invalid)?
+                    .unwrap_or("");
                 compare(m, get(of)?, get(reference)?)?
             } else if m.kind == "convergence" {
                 convergence(m, spec)?
             } else if let Some(input) = m.params.str("input").map_err(Error::invalid)? {
-                let c = spec
-                    .measured_input(input)
-                    .ok_or_else(|| Error::invalid(format!("measurement '{}': unknown measured input '{input}'", m.name)))?;
+                let c = spec.measured_input(input).ok_or_else(|| {
+                    Error::invalid(format!(
+                        "measurement '{}': unknown measured input '{input}'",
+                        m.name
+                    ))
+                })?;
                 if !caps.contains_key(input) {
                     caps.insert(input.to_string(), load_capture(c)?);
                 }

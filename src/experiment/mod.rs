@@ -18,13 +18,13 @@
 pub mod apply;
 pub mod embedded;
 pub mod hooks;
+pub mod measured;
 pub mod parse;
 pub mod plan;
 pub mod results;
 pub mod run;
 pub mod source;
 pub mod spec;
-pub mod measured;
 pub mod stages;
 pub mod sweep;
 pub mod units;

@@ -1220,7 +1220,12 @@ impl P {
     }
 
     /// `measured "name" file="…" [pixel-um=P] [labels="…png" names="…txt"]`.
-    fn parse_measured(&self, file: usize, n: &KdlNode, dir: &Path) -> Result<MeasuredInput, Located> {
+    fn parse_measured(
+        &self,
+        file: usize,
+        n: &KdlNode,
+        dir: &Path,
+    ) -> Result<MeasuredInput, Located> {
         const KNOWN: &[&str] = &["file", "pixel-um", "labels", "names"];
         let sp = self.node_span(file, n);
         let mut name: Option<(String, Span)> = None;
@@ -1228,12 +1233,16 @@ impl P {
         for e in self.entries(file, n)? {
             let Some((k, ks)) = &e.name else {
                 if name.is_some() {
-                    return Err(self.e(e.vspan, "'measured' takes one name").with_help(
-                        "write measured \"capture-near\" file=\"captures/edge.dng\"",
-                    ));
+                    return Err(self
+                        .e(e.vspan, "'measured' takes one name")
+                        .with_help("write measured \"capture-near\" file=\"captures/edge.dng\""));
                 }
                 let s = apply::as_str(&e.value, "name").map_err(|x| self.ae(e.vspan, x))?;
-                if s.is_empty() || s.contains('.') || s.contains(',') || s.contains(char::is_whitespace) {
+                if s.is_empty()
+                    || s.contains('.')
+                    || s.contains(',')
+                    || s.contains(char::is_whitespace)
+                {
                     return Err(self
                         .e(e.vspan, format!("invalid measured input name '{s}'"))
                         .with_help("non-empty, without '.', ',' or spaces"));
@@ -1257,11 +1266,19 @@ impl P {
                             .to_ascii_lowercase();
                         if !matches!(ext.as_str(), "png" | "exr" | "dng" | "tif" | "tiff") {
                             return Err(self
-                                .e(e.vspan, format!("captured image '{w}': expected a .png, .exr or .dng file"))
-                                .with_help("PNG (8/16 bit), OpenEXR and DNG/TIFF captures are read"));
+                                .e(
+                                    e.vspan,
+                                    format!(
+                                        "captured image '{w}': expected a .png, .exr or .dng file"
+                                    ),
+                                )
+                                .with_help(
+                                    "PNG (8/16 bit), OpenEXR and DNG/TIFF captures are read",
+                                ));
                         }
                     }
-                    let mut f = apply::file_ref(w, dir, what, self.loader).map_err(|x| self.ae(e.vspan, x))?;
+                    let mut f = apply::file_ref(w, dir, what, self.loader)
+                        .map_err(|x| self.ae(e.vspan, x))?;
                     f.span = e.vspan;
                     match k.as_str() {
                         "file" => img = Some(f),
@@ -1270,7 +1287,8 @@ impl P {
                     }
                 }
                 "pixel-um" => {
-                    pixel_um = Some(apply::as_positive(&e.value, k).map_err(|x| self.ae(e.vspan, x))?);
+                    pixel_um =
+                        Some(apply::as_positive(&e.value, k).map_err(|x| self.ae(e.vspan, x))?);
                 }
                 _ => return Err(self.unknown_prop(k, *ks, KNOWN, "measured", &e.value)),
             }
@@ -1287,10 +1305,16 @@ impl P {
         };
         match (&labels, &names) {
             (Some((_, s)), None) => {
-                return Err(self.e(*s, "labels=\"…png\" needs names=\"…txt\" (line k names label value k)"));
+                return Err(self.e(
+                    *s,
+                    "labels=\"…png\" needs names=\"…txt\" (line k names label value k)",
+                ));
             }
             (None, Some((_, s))) => {
-                return Err(self.e(*s, "names=\"…txt\" needs labels=\"…png\" (a grey label map)"));
+                return Err(self.e(
+                    *s,
+                    "names=\"…txt\" needs labels=\"…png\" (a grey label map)",
+                ));
             }
             _ => {}
         }

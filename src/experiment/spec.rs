@@ -242,7 +242,12 @@ impl ResolvedExperiment {
         v.extend(self.bases.iter().cloned());
         for c in &self.measured {
             v.push(c.file.path.clone());
-            v.extend([&c.labels, &c.names].into_iter().flatten().map(|f| f.path.clone()));
+            v.extend(
+                [&c.labels, &c.names]
+                    .into_iter()
+                    .flatten()
+                    .map(|f| f.path.clone()),
+            );
         }
         // Spectra read from CSV files (`spectrum="data.csv#column"`).
         let dir = self.file.parent().unwrap_or(std::path::Path::new(""));
