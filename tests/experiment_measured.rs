@@ -338,6 +338,12 @@ fn missing_capture_and_unknown_input_are_located_errors() {
             "4:39",
             &["strictly increasing"],
         ),
+        // a swept input name is checked like a written one
+        (
+            "experiment \"x\" {\n    measured \"cap\" file=\"edge.png\"\n    measure \"ri\" name=\"r\" input=\"cap\"\n    sweep {\n        measure.r.input \"cap\" \"cpa\"\n    }\n}\n",
+            "5:31",
+            &["unknown measured input 'cpa'", "did you mean 'cap'?"],
+        ),
         // a property measured does not know
         (
             "experiment \"x\" {\n    measured \"cap\" file=\"edge.png\" pixel-pitch-um=1.4\n    measure \"ri\" input=\"cap\"\n}\n",
