@@ -291,6 +291,15 @@ fn captured_edge_and_chart_measured_without_rendering() {
     assert!(first("sfr-measured") < first("a-vs-b") && first("a-vs-b") < first("mcc-a"));
     // The scatter curve is written for the report.
     assert!(out.join("captures/curves").exists());
+
+    // Resume: the captures' contents are inputs of the variant's hash.
+    let again = camsim(&["run", exp.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(stderr(&again).contains("0 done, 1 cached"), "{}", stderr(&again));
+    mcc_capture(&d.join("captures"), "mcc_b.png", 1.2);
+    let changed = camsim(&["run", exp.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(stderr(&changed).contains("1 done, 0 cached"), "{}", stderr(&changed));
+    let rows = results(&out.join("captures/results.csv"));
+    assert!((get(&rows, "a-vs-b", "slope").0 - 1.0 / 1.2).abs() < 1e-4);
 }
 
 #[test]
