@@ -294,10 +294,18 @@ fn captured_edge_and_chart_measured_without_rendering() {
 
     // Resume: the captures' contents are inputs of the variant's hash.
     let again = camsim(&["run", exp.to_str().unwrap(), "--out", out.to_str().unwrap()]);
-    assert!(stderr(&again).contains("0 done, 1 cached"), "{}", stderr(&again));
+    assert!(
+        stderr(&again).contains("0 done, 1 cached"),
+        "{}",
+        stderr(&again)
+    );
     mcc_capture(&d.join("captures"), "mcc_b.png", 1.2);
     let changed = camsim(&["run", exp.to_str().unwrap(), "--out", out.to_str().unwrap()]);
-    assert!(stderr(&changed).contains("1 done, 0 cached"), "{}", stderr(&changed));
+    assert!(
+        stderr(&changed).contains("1 done, 0 cached"),
+        "{}",
+        stderr(&changed)
+    );
     let rows = results(&out.join("captures/results.csv"));
     assert!((get(&rows, "a-vs-b", "slope").0 - 1.0 / 1.2).abs() < 1e-4);
 }
@@ -494,4 +502,44 @@ fn convergence_renders_each_spp_and_follows_the_figures() {
         );
     }
     assert_eq!(all[0], all[1], "same inputs and seed give the same figures");
+}
+
+#[test]
+fn dng_capture_is_measured_per_cfa_channel_and_matches_the_png() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    mcc_capture(d, "chart.png", 1.0);
+    // The same chart as a raw RGGB mosaic with a black level of 64 DV: each
+    // pixel holds its CFA channel's value of the patch.
+    let (w, h) = (6 * 11 + 1, 4 * 11 + 1);
+    let cfa = camsim::image::CfaPattern::bayer("rggb").unwrap();
+    let png = camsim::measure::io::read_image(&d.join("chart.png")).unwrap();
+    let mut dv = vec![0u16; (w * h) as usize];
+    for y in 0..h {
+        for x in 0..w {
+            let name = &cfa.channels[cfa.channel_at(x, y)];
+            let plane = &png.planes.iter().find(|p| &p.0 == name).unwrap().1;
+            dv[(y * w + x) as usize] = 64 + plane.get(x as usize, y as usize) as u16;
+        }
+    }
+    camsim::measure::io::write_dng_cfa(&d.join("chart.dng"), w, h, &dv, &cfa, 64.0, 65535.0)
+        .unwrap();
+    let exp = d.join("dng.kdl");
+    std::fs::write(
+        &exp,
+        "experiment \"dng\" {\n    measured \"raw\" file=\"chart.dng\" labels=\"labels.png\" names=\"names.txt\"\n    measured \"rgb\" file=\"chart.png\" labels=\"labels.png\" names=\"names.txt\"\n    measure \"mcc\" name=\"mcc-raw\" input=\"raw\"\n    measure \"mcc\" name=\"mcc-rgb\" input=\"rgb\"\n    measure \"compare\" of=\"mcc-raw\" reference=\"mcc-rgb\"\n}\n",
+    )
+    .unwrap();
+    let out = d.join("out");
+    let r = camsim(&["run", exp.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+    let rows = results(&out.join("dng/results.csv"));
+    // Black level subtracted; patch 9 has RGB (9000, 6500, 21000).
+    assert_eq!(get(&rows, "mcc-raw", "patch09/r_mean").0, 9000.0);
+    assert_eq!(get(&rows, "mcc-raw", "patch09/g_mean").0, 6500.0);
+    assert_eq!(get(&rows, "mcc-raw", "patch09/b_mean").0, 21000.0);
+    // The mosaic and the RGB capture agree exactly on all 72 means.
+    assert_eq!(get(&rows, "compare", "pairs").0, 72.0);
+    assert_eq!(get(&rows, "compare", "rmse").0, 0.0);
+    assert_eq!(get(&rows, "compare", "slope").0, 1.0);
 }
