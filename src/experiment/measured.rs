@@ -606,15 +606,16 @@ pub fn convergence(m: &Measure, spec: &ResolvedExperiment) -> Result<Measured> {
         s.render.spp = spp;
         s.render.seed = seed;
         let t = Instant::now();
-        let oi = stages::render(&s, &scene, camera.as_ref())?;
+        let r = stages::render(&s, &scene, camera.as_ref())?;
         let dt = t.elapsed().as_secs_f64();
+        let oi = r.oi;
         let si = if need.sensor_image {
             Some(stages::simulate_sensor(&s, &oi)?)
         } else {
             None
         };
         Ok((
-            stages::measure(target, &s, Some(&oi), si.as_ref())?.figures,
+            stages::measure(target, &s, Some(&oi), si.as_ref(), &r.object_rects)?.figures,
             dt,
         ))
     };
@@ -703,6 +704,7 @@ pub fn measure_all(
     spec: &ResolvedExperiment,
     oi: Option<&OpticalImage>,
     si: Option<&SensorImage>,
+    object_rects: &BTreeMap<String, Rect>,
 ) -> Result<Vec<Measured>> {
     let mut caps: BTreeMap<String, Capture> = BTreeMap::new();
     let mut done: Vec<Option<Measured>> = vec![None; spec.measures.len()];
@@ -742,7 +744,7 @@ pub fn measure_all(
                 }
                 measure_capture(m, spec, input, &caps[input])?
             } else {
-                stages::measure(m, spec, oi, si)?
+                stages::measure(m, spec, oi, si, object_rects)?
             };
             done[i] = Some(r);
         }

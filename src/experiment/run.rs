@@ -119,11 +119,14 @@ pub fn run_variant(v: &PlannedVariant) -> Result<VariantOutput> {
     let mut out = VariantOutput::default();
     let mut oi = None;
     let mut si = None;
+    let mut object_rects = std::collections::BTreeMap::new();
     if need.optical_image {
         let scene = stages::build_scene(spec)?;
         let camera = stages::build_camera(spec, &scene)?;
         let t = Instant::now();
-        oi = Some(stages::render(spec, &scene, camera.as_ref())?);
+        let r = stages::render(spec, &scene, camera.as_ref())?;
+        object_rects = r.object_rects;
+        oi = Some(r.oi);
         out.render_s = t.elapsed().as_secs_f64();
     }
     if let Some(o) = &oi {
@@ -160,7 +163,7 @@ pub fn run_variant(v: &PlannedVariant) -> Result<VariantOutput> {
         si = Some(s);
     }
     let mut rois = vec![];
-    let results = super::measured::measure_all(spec, oi.as_ref(), si.as_ref())?;
+    let results = super::measured::measure_all(spec, oi.as_ref(), si.as_ref(), &object_rects)?;
     for (m, r) in spec.measures.iter().zip(results) {
         for f in &r.figures {
             if !f.value.is_finite() || !f.stderr.is_finite() {

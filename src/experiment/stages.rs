@@ -20,6 +20,7 @@ use crate::sensor::SensorConfig;
 use crate::spectrum::{Spectrum, WavelengthGrid, library};
 use crate::{Error, Result};
 use glam::DVec3;
+use std::collections::BTreeMap;
 use std::path::Path;
 
 /// Which stages a measurement needs.
@@ -433,7 +434,7 @@ fn roi_of_objects(
     camera: &dyn Camera,
     film: &FilmSpec,
     objects: &[(String, bool)],
-) -> Result<Rect> {
+) -> Result<(Rect, BTreeMap<String, Rect>)> {
     let k = (film.width_px.max(film.height_px) as f64 / 512.0)
         .ceil()
         .max(1.0) as u32;
@@ -452,6 +453,7 @@ fn roi_of_objects(
     };
     let img = crate::render::render(scene, camera, &coarse, &settings)?;
     let mut roi: Option<Rect> = None;
+    let mut rects = BTreeMap::new();
     for (name, strip) in objects {
         let ids: Vec<u32> = img
             .label_names
@@ -491,21 +493,29 @@ fn roi_of_objects(
             );
             r = edge_strip(inner);
         }
+        rects.insert(name.clone(), r);
         roi = Some(roi.map_or(r, |a| a.union(&r)));
     }
-    roi.ok_or_else(|| Error::invalid("no objects to measure"))
+    let roi = roi.ok_or_else(|| Error::invalid("no objects to measure"))?;
+    Ok((roi, rects))
+}
+
+/// The optical image and, per measured object, the film rectangle (full-frame
+/// pixels) chosen for it by the label pass.
+pub struct Rendered {
+    pub oi: OpticalImage,
+    pub object_rects: BTreeMap<String, Rect>,
 }
 
 /// Render the optical image (only the regions the measurements read).
-pub fn render(
-    spec: &ResolvedExperiment,
-    scene: &Scene,
-    camera: &dyn Camera,
-) -> Result<OpticalImage> {
+pub fn render(spec: &ResolvedExperiment, scene: &Scene, camera: &dyn Camera) -> Result<Rendered> {
     let film = film_spec(spec, scene)?;
-    let roi = match wanted_objects(spec) {
-        Some(objs) if !objs.is_empty() => Some(roi_of_objects(scene, camera, &film, &objs)?),
-        _ => None,
+    let (roi, object_rects) = match wanted_objects(spec) {
+        Some(objs) if !objs.is_empty() => {
+            let (r, m) = roi_of_objects(scene, camera, &film, &objs)?;
+            (Some(r), m)
+        }
+        _ => (None, BTreeMap::new()),
     };
     let settings = RenderSettings {
         spp: u32::try_from(spec.render.spp)
@@ -516,7 +526,8 @@ pub fn render(
         roi,
         ..Default::default()
     };
-    crate::render::render(scene, camera, &film, &settings)
+    let oi = crate::render::render(scene, camera, &film, &settings)?;
+    Ok(Rendered { oi, object_rects })
 }
 
 /// Turn the optical image into sensor digital values.
@@ -569,6 +580,7 @@ pub fn measure(
     spec: &ResolvedExperiment,
     oi: Option<&OpticalImage>,
     si: Option<&SensorImage>,
+    object_rects: &BTreeMap<String, Rect>,
 ) -> Result<Measured> {
     let need_si = || {
         si.ok_or_else(|| Error::invalid(format!("measurement '{}' needs a sensor image", m.name)))
@@ -599,14 +611,29 @@ pub fn measure(
             }
             let mut out = Measured::default();
             for obj in &m.of {
-                // The edge strip of the plate. The render window already holds just
-                // that strip when the runner chose it, so the label box is clipped
-                // to it; measure the part of the window the plate covers.
-                let b = label_box(&si.labels, &si.label_names, si.width(), si.height(), obj)?;
-                let roi = if b.w == si.width() || b.h == si.height() {
-                    b
-                } else {
-                    edge_strip(b)
+                // The edge strip chosen for this plate by the render stage (full-frame
+                // pixels → window pixels); without one, the strip of its label box.
+                let roi = match object_rects.get(obj) {
+                    Some(r) => {
+                        let w = si.window;
+                        let x0 = r.x.max(w.x);
+                        let y0 = r.y.max(w.y);
+                        let x1 = (r.x + r.w).min(w.x + w.w);
+                        let y1 = (r.y + r.h).min(w.y + w.h);
+                        if x1 <= x0 || y1 <= y0 {
+                            return Err(Error::invalid(format!(
+                                "object '{obj}' is outside the rendered window"
+                            )));
+                        }
+                        Rect::new(x0 - w.x, y0 - w.y, x1 - x0, y1 - y0)
+                    }
+                    None => edge_strip(label_box(
+                        &si.labels,
+                        &si.label_names,
+                        si.width(),
+                        si.height(),
+                        obj,
+                    )?),
                 };
                 let (sfr, roi) = crate::measure::sfr::sfr_of_region(&plane, roi, &opts)?;
                 let r = prefixed(sfr.measured(&m.name, roi), obj);
