@@ -393,6 +393,9 @@ pub fn apply(
             }
         }
         ["measure", name, key] => {
+            if *key == "input" {
+                super::measured::check_input_name(spec, as_str(v, "input")?)?;
+            }
             let Some(m) = spec.measures.iter_mut().find(|m| m.name == *name) else {
                 let names: Vec<&str> = spec.measures.iter().map(|m| m.name.as_str()).collect();
                 let mut e = ApplyError::new(format!(

@@ -7,6 +7,7 @@
 //! - [`apply`]: typed values and parameter paths (shared by parser and sweeps)
 //! - [`sweep`]: axes, zip groups, ranges, variant ids
 //! - [`plan`]: variants + input hashes, JSON
+//! - [`measured`]: captured images (`measured` nodes), `compare`, `convergence`
 //! - [`stages`]: scene → camera → render → sensor → measure (one function each)
 //! - [`run`]: the runner (resume, shards, interruption)
 //! - [`results`]: CSV, manifest, merge
@@ -17,6 +18,7 @@
 pub mod apply;
 pub mod embedded;
 pub mod hooks;
+pub mod measured;
 pub mod parse;
 pub mod plan;
 pub mod results;

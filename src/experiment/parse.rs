@@ -50,6 +50,7 @@ const EXPERIMENT_NODES: &[&str] = &[
     "render",
     "sweep",
     "measure",
+    "measured",
 ];
 const SINGLETONS: &[&str] = &[
     "description",
@@ -495,6 +496,7 @@ impl P {
             sensor: None,
             render: RenderSettings::default(),
             measures: Vec::new(),
+            measured: Vec::new(),
             tags: BTreeMap::new(),
         };
         // Indexes for duplicate checks (linear scans would be quadratic in big files).
@@ -547,6 +549,7 @@ impl P {
             spec.lens = bspec.lens;
             spec.sensor = bspec.sensor;
             spec.render = bspec.render;
+            spec.measured = bspec.measured;
         }
         for a in &spec.additions {
             add_spans.insert(a.id.clone(), a.span);
@@ -800,11 +803,22 @@ impl P {
                     measure_spans.insert(m.name.clone(), m.span);
                     spec.measures.push(m);
                 }
+                "measured" => {
+                    self.no_children(file, n)?;
+                    let c = self.parse_measured(file, n, &dir)?;
+                    if let Some(prev) = spec.measured.iter().find(|p| p.name == c.name) {
+                        return Err(self
+                            .e(c.span, format!("duplicate measured input '{}'", c.name))
+                            .with_help(format!("first given at {}", self.where_(prev.span))));
+                    }
+                    spec.measured.push(c);
+                }
                 "sweep" => sweep_node = Some(n),
                 _ => unreachable!("checked above"),
             }
         }
         let _ = camera_given;
+        super::measured::check_references(&spec).map_err(|(sp, e)| self.ae(sp, e))?;
         if kind == DocKind::Experiment && spec.measures.is_empty() {
             return Err(self
                 .e(tspan, format!("experiment '{name}' measures nothing"))
@@ -1181,6 +1195,7 @@ impl P {
                     "of" => {
                         let s = apply::as_str(&e.value, "of").map_err(|x| self.ae(e.vspan, x))?;
                         m.of.insert(0, s.to_string());
+                        m.value_spans.insert("of".into(), e.vspan);
                     }
                     _ => {
                         apply::check_generic(k, &e.value).map_err(|x| self.ae(*ks, x))?;
@@ -1202,6 +1217,115 @@ impl P {
         m.name = name.unwrap_or_else(|| kind.clone());
         m.kind = kind;
         Ok(m)
+    }
+
+    /// `measured "name" file="…" [pixel-um=P] [labels="…png" names="…txt"]`.
+    fn parse_measured(
+        &self,
+        file: usize,
+        n: &KdlNode,
+        dir: &Path,
+    ) -> Result<MeasuredInput, Located> {
+        const KNOWN: &[&str] = &["file", "pixel-um", "labels", "names"];
+        let sp = self.node_span(file, n);
+        let mut name: Option<(String, Span)> = None;
+        let (mut img, mut labels, mut names, mut pixel_um) = (None, None, None, None);
+        for e in self.entries(file, n)? {
+            let Some((k, ks)) = &e.name else {
+                if name.is_some() {
+                    return Err(self
+                        .e(e.vspan, "'measured' takes one name")
+                        .with_help("write measured \"capture-near\" file=\"captures/edge.dng\""));
+                }
+                let s = apply::as_str(&e.value, "name").map_err(|x| self.ae(e.vspan, x))?;
+                if s.is_empty()
+                    || s.contains('.')
+                    || s.contains(',')
+                    || s.contains(char::is_whitespace)
+                {
+                    return Err(self
+                        .e(e.vspan, format!("invalid measured input name '{s}'"))
+                        .with_help("non-empty, without '.', ',' or spaces"));
+                }
+                name = Some((s.to_string(), e.vspan));
+                continue;
+            };
+            match k.as_str() {
+                "file" | "labels" | "names" => {
+                    let w = apply::as_str(&e.value, k).map_err(|x| self.ae(e.vspan, x))?;
+                    let what = match k.as_str() {
+                        "file" => "captured image",
+                        "labels" => "label map",
+                        _ => "label names",
+                    };
+                    if k == "file" {
+                        let ext = Path::new(w)
+                            .extension()
+                            .and_then(|x| x.to_str())
+                            .unwrap_or("")
+                            .to_ascii_lowercase();
+                        if !matches!(ext.as_str(), "png" | "exr" | "dng" | "tif" | "tiff") {
+                            return Err(self
+                                .e(
+                                    e.vspan,
+                                    format!(
+                                        "captured image '{w}': expected a .png, .exr or .dng file"
+                                    ),
+                                )
+                                .with_help(
+                                    "PNG (8/16 bit), OpenEXR and DNG/TIFF captures are read",
+                                ));
+                        }
+                    }
+                    let mut f = apply::file_ref(w, dir, what, self.loader)
+                        .map_err(|x| self.ae(e.vspan, x))?;
+                    f.span = e.vspan;
+                    match k.as_str() {
+                        "file" => img = Some(f),
+                        "labels" => labels = Some((f, *ks)),
+                        _ => names = Some((f, *ks)),
+                    }
+                }
+                "pixel-um" => {
+                    pixel_um =
+                        Some(apply::as_positive(&e.value, k).map_err(|x| self.ae(e.vspan, x))?);
+                }
+                _ => return Err(self.unknown_prop(k, *ks, KNOWN, "measured", &e.value)),
+            }
+        }
+        let Some((name, nspan)) = name else {
+            return Err(self
+                .e(sp, "'measured' needs a name")
+                .with_help("write measured \"capture-near\" file=\"captures/edge.dng\""));
+        };
+        let Some(img) = img else {
+            return Err(self
+                .e(nspan, format!("measured input '{name}' needs file=\"…\""))
+                .with_help("e.g. file=\"captures/edge_near.dng\" (PNG, EXR or DNG)"));
+        };
+        match (&labels, &names) {
+            (Some((_, s)), None) => {
+                return Err(self.e(
+                    *s,
+                    "labels=\"…png\" needs names=\"…txt\" (line k names label value k)",
+                ));
+            }
+            (None, Some((_, s))) => {
+                return Err(self.e(
+                    *s,
+                    "names=\"…txt\" needs labels=\"…png\" (a grey label map)",
+                ));
+            }
+            _ => {}
+        }
+        Ok(MeasuredInput {
+            name,
+            file: img,
+            pixel_um,
+            labels: labels.map(|l| l.0),
+            names: names.map(|l| l.0),
+            span: nspan,
+        })
     }
 
     fn parse_axis(

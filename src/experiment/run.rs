@@ -110,7 +110,7 @@ pub struct VariantOutput {
 pub fn run_variant(v: &PlannedVariant) -> Result<VariantOutput> {
     let spec = &v.variant.spec;
     let need = spec.measures.iter().fold(stages::Needs::default(), |a, m| {
-        let n = stages::needs(&m.kind);
+        let n = super::measured::needs_of(m);
         stages::Needs {
             optical_image: a.optical_image || n.optical_image || n.sensor_image,
             sensor_image: a.sensor_image || n.sensor_image,
@@ -163,8 +163,8 @@ pub fn run_variant(v: &PlannedVariant) -> Result<VariantOutput> {
         si = Some(s);
     }
     let mut rois = vec![];
-    for m in &spec.measures {
-        let r = stages::measure(m, spec, oi.as_ref(), si.as_ref(), &object_rects)?;
+    let results = super::measured::measure_all(spec, oi.as_ref(), si.as_ref(), &object_rects)?;
+    for (m, r) in spec.measures.iter().zip(results) {
         for f in &r.figures {
             if !f.value.is_finite() || !f.stderr.is_finite() {
                 return Err(Error::invalid(format!(
@@ -173,7 +173,9 @@ pub fn run_variant(v: &PlannedVariant) -> Result<VariantOutput> {
                 )));
             }
         }
-        for p in &r.pixels_read {
+        // Regions read on a captured image are not pixels of the sensor preview.
+        let on_sensor = m.params.get("input").is_none();
+        for p in r.pixels_read.iter().filter(|_| on_sensor) {
             rois.push(serde_json::json!({"x": p.x, "y": p.y, "w": p.w, "h": p.h, "label": m.name}));
         }
         out.figures.extend(r.figures);

@@ -156,6 +156,26 @@ pub struct Measure {
     pub value_spans: BTreeMap<String, Span>,
 }
 
+/// A captured image named by the experiment (`measured "capture-near"
+/// file="captures/edge.dng" [pixel-um=1.4] [labels="…png" names="…txt"]`).
+/// Measurements read it with `input="capture-near"` instead of the simulated
+/// sensor image. A label map (grey PNG, value k = the object on line k of
+/// `names`) gives the capture object labels for `mcc` and `profile`.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct MeasuredInput {
+    pub name: String,
+    pub file: FileRef,
+    /// Pixel pitch in µm (for cy/mm figures).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pixel_um: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub labels: Option<FileRef>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub names: Option<FileRef>,
+    #[serde(skip)]
+    pub span: Span,
+}
+
 /// Known measurement kinds.
 pub const MEASURE_KINDS: &[&str] = &[
     "colorimetry",
@@ -190,11 +210,19 @@ pub struct ResolvedExperiment {
     pub sensor: Option<ConfigSection>,
     pub render: RenderSettings,
     pub measures: Vec<Measure>,
+    /// Captured images (`measured "name" file="…"`), read by measurements with `input="name"`.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub measured: Vec<MeasuredInput>,
     /// Values of label-only sweep axes (`tag.<name>`), for ids and results.
     pub tags: BTreeMap<String, Value>,
 }
 
 impl ResolvedExperiment {
+    /// The captured image called `name`.
+    pub fn measured_input(&self, name: &str) -> Option<&MeasuredInput> {
+        self.measured.iter().find(|c| c.name == name)
+    }
+
     /// Files whose contents are inputs of a variant (hashed for resume).
     pub fn referenced_files(&self) -> Vec<PathBuf> {
         let mut v = Vec::new();
@@ -212,6 +240,15 @@ impl ResolvedExperiment {
             }
         }
         v.extend(self.bases.iter().cloned());
+        for c in &self.measured {
+            v.push(c.file.path.clone());
+            v.extend(
+                [&c.labels, &c.names]
+                    .into_iter()
+                    .flatten()
+                    .map(|f| f.path.clone()),
+            );
+        }
         // Spectra read from CSV files (`spectrum="data.csv#column"`).
         let dir = self.file.parent().unwrap_or(std::path::Path::new(""));
         for m in &self.measures {

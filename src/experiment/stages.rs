@@ -397,8 +397,11 @@ pub fn build_camera(spec: &ResolvedExperiment, scene: &Scene) -> Result<Box<dyn 
 fn wanted_objects(spec: &ResolvedExperiment) -> Option<Vec<(String, bool)>> {
     let mut v = vec![];
     for m in &spec.measures {
+        if m.params.get("input").is_some() {
+            continue; // reads a captured image
+        }
         match m.kind.as_str() {
-            "colorimetry" => {}
+            "colorimetry" | "compare" | "convergence" => {}
             "sfr" => v.extend(m.of.iter().map(|o| (o.clone(), true))),
             "profile" | "mcc" if !m.of.is_empty() => {
                 v.extend(m.of.iter().map(|o| (o.clone(), false)))

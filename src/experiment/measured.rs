@@ -1,0 +1,753 @@
+//! Measured inputs, comparisons and convergence inside an experiment run.
+//!
+//! - **Captured images**: `measured "capture-near" file="captures/edge.dng"
+//!   [pixel-um=1.4] [labels="labels.png" names="names.txt"]` names a real
+//!   capture (PNG 8/16 bit, OpenEXR, DNG/TIFF; read by
+//!   [`crate::measure::io::read_image`]). A measurement with
+//!   `input="capture-near"` reads it instead of the simulated sensor image,
+//!   so its rows land in the same `results.csv` as the simulated ones.
+//!   Captures carry no renderer labels: `sfr` needs `roi-px=(x y w h)` (or
+//!   `of=` objects of the capture's label map), `mcc` and `profile` need the
+//!   label map (a grey PNG, value k = the object named on line k of `names`,
+//!   the format `camsim measure mcc --labels --names` reads), `noise` needs
+//!   `conversion-gain-dv-e=`. Measurements on captures need no render: the
+//!   runner skips every stage when an experiment measures captures only.
+//! - **compare**: `measure "compare" of="mcc" reference="mcc-measured"`
+//!   pairs the figures of two measurements of the same variant by quantity
+//!   name (and unit) and reports RMSE, % errors and the slope through the
+//!   origin with a scatter curve ([`crate::measure::compare`]). It runs after
+//!   every other measurement of the variant. `quantity="_mean"` keeps only
+//!   quantities containing that text; `normalize="mean"` divides each side by
+//!   its mean over the pairs first (compares shapes, not exposure).
+//! - **convergence**: `measure "convergence" of="sfr" spp=(16 64 256)
+//!   [reference-spp=1024] [quantity="mtf50"]` (quantities containing that
+//!   text; default all) renders the region the named
+//!   measurement reads once per sample count (each with its own seed,
+//!   `render.seed + 1 + k`, so the runs are independent), runs the same
+//!   stages and measurement, and reports per quantity the log–log slope of
+//!   standard error against render time, the efficiency, and — with
+//!   `reference-spp` (rendered with the variant's seed) — the error against
+//!   that reference ([`crate::measure::convergence`]). Sensor measurements keep
+//!   the sensor's noise, which puts a floor under their standard error; the
+//!   optical-image measurement `ri` shows the pure Monte Carlo error.
+
+use super::apply::{ApplyError, as_int, as_str, describe};
+use super::source::Span;
+use super::spec::{Measure, MeasuredInput, ResolvedExperiment};
+use super::stages;
+use crate::figure::Figure;
+use crate::image::SensorImage;
+use crate::measure::Measured;
+use crate::measure::io::{LoadedImage, read_image, read_label_map};
+use crate::optical_image::{OpticalImage, Rect};
+use crate::params::Value;
+use crate::{Error, Result};
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+/// Measurement kinds that can read a captured image (`input=`).
+pub const INPUT_KINDS: &[&str] = &["sfr", "mcc", "profile", "noise", "ri"];
+/// Measurement kinds whose figures convergence can follow.
+const CONVERGENCE_KINDS: &[&str] = &["sfr", "mcc", "profile", "noise", "ri"];
+
+/// The measured input called `name`, or an error with a did-you-mean.
+pub fn check_input_name<'a>(
+    spec: &'a ResolvedExperiment,
+    name: &str,
+) -> Result<&'a MeasuredInput, ApplyError> {
+    if let Some(c) = spec.measured_input(name) {
+        return Ok(c);
+    }
+    let names: Vec<&str> = spec.measured.iter().map(|c| c.name.as_str()).collect();
+    let mut e = ApplyError::new(if names.is_empty() {
+        format!("unknown measured input '{name}': the experiment names no captured images")
+    } else {
+        format!(
+            "unknown measured input '{name}'; expected one of: {}",
+            names.join(", ")
+        )
+    });
+    e.help = crate::diag::did_you_mean(name, names.iter().copied())
+        .map(|s| format!("did you mean '{s}'?"))
+        .or_else(|| Some(format!("add measured \"{name}\" file=\"captures/….png\"")));
+    Err(e)
+}
+
+/// `roi-px=(x y w h)`: non-negative integers, w and h ≥ 1.
+pub fn roi_px(v: &Value) -> Result<Rect, ApplyError> {
+    let bad = || {
+        ApplyError::new(format!(
+            "'roi-px': expected (x y w h) in pixels, found {}",
+            describe(v)
+        ))
+        .help("e.g. roi-px=(100 80 64 128): left, top, width, height")
+    };
+    let Value::List(l) = v else { return Err(bad()) };
+    if l.len() != 4 {
+        return Err(bad());
+    }
+    let mut x = [0u32; 4];
+    for (o, e) in x.iter_mut().zip(l) {
+        *o = as_int(e, "roi-px", 0, u32::MAX as u64)? as u32;
+    }
+    if x[2] == 0 || x[3] == 0 {
+        return Err(
+            ApplyError::new("'roi-px': width and height must be ≥ 1").help("roi-px=(x y w h)")
+        );
+    }
+    Ok(Rect::new(x[0], x[1], x[2], x[3]))
+}
+
+/// Parse-time checks of the references between nodes: `input=` names a
+/// `measured` node (and what the kind needs of it), `compare` and
+/// `convergence` name other measurements. Errors point at the value.
+pub fn check_references(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError)> {
+    for m in &spec.measures {
+        let at = |k: &str| m.value_spans.get(k).copied().unwrap_or(m.span);
+        let name_at = |k: &str| m.param_spans.get(k).copied().unwrap_or(m.span);
+        if let Some(v) = m.params.get("input") {
+            let name = as_str(v, "input").map_err(|e| (at("input"), e))?;
+            let c = check_input_name(spec, name).map_err(|e| (at("input"), e))?;
+            if !INPUT_KINDS.contains(&m.kind.as_str()) {
+                return Err((
+                    at("input"),
+                    ApplyError::new(format!(
+                        "measurement '{}' cannot read a captured image; kinds that can: {}",
+                        m.kind,
+                        INPUT_KINDS.join(", ")
+                    )),
+                ));
+            }
+            if let Some(r) = m.params.get("roi-px") {
+                roi_px(r).map_err(|e| (at("roi-px"), e))?;
+            }
+            let labelled = c.labels.is_some();
+            let need =
+                |msg: String, help: &str| Err((at("input"), ApplyError::new(msg).help(help)));
+            match m.kind.as_str() {
+                "sfr" if m.params.get("roi-px").is_none() && (m.of.is_empty() || !labelled) => {
+                    return need(
+                        format!(
+                            "sfr on the captured image '{name}' needs roi-px=(x y w h) around the edge"
+                        ),
+                        "captures carry no object labels; or give the capture labels=… names=… and of=\"<object>\"",
+                    );
+                }
+                "mcc" | "profile" if !labelled => {
+                    return need(
+                        format!(
+                            "{} on the captured image '{name}' needs its label map",
+                            m.kind
+                        ),
+                        "add labels=\"labels.png\" names=\"names.txt\" to the measured node",
+                    );
+                }
+                "noise" if m.params.get("conversion-gain-dv-e").is_none() => {
+                    return need(
+                        format!(
+                            "noise on the captured image '{name}' needs conversion-gain-dv-e=…"
+                        ),
+                        "the camera's conversion gain in DV per electron (Appendix IV's Poisson test)",
+                    );
+                }
+                _ => {}
+            }
+        }
+        match m.kind.as_str() {
+            "compare" => {
+                const KNOWN: &[&str] = &["reference", "quantity", "normalize"];
+                if let Some(u) = m.params.unknown(KNOWN).first() {
+                    let e = crate::experiment::hooks::ParamError::unknown(u, KNOWN);
+                    return Err((
+                        name_at(u),
+                        ApplyError {
+                            message: e.message,
+                            help: e.help,
+                            on_path: false,
+                        },
+                    ));
+                }
+                let of = match m.of.as_slice() {
+                    [one] => one.as_str(),
+                    _ => {
+                        return Err((
+                            at("of"),
+                            ApplyError::new(
+                                "compare needs of=\"<measurement>\" (one simulated measurement)",
+                            )
+                            .help("e.g. measure \"compare\" of=\"mcc\" reference=\"mcc-measured\""),
+                        ));
+                    }
+                };
+                check_measurement_ref(spec, m, of).map_err(|e| (at("of"), e))?;
+                let r = match m.params.get("reference") {
+                    Some(v) => as_str(v, "reference").map_err(|e| (at("reference"), e))?,
+                    None => {
+                        return Err((
+                            m.span,
+                            ApplyError::new("compare needs reference=\"<measurement>\"")
+                                .help("e.g. reference=\"mcc-measured\", a measurement of a captured image"),
+                        ));
+                    }
+                };
+                check_measurement_ref(spec, m, r).map_err(|e| (at("reference"), e))?;
+                if r == of {
+                    return Err((
+                        at("reference"),
+                        ApplyError::new("compare: of and reference name the same measurement"),
+                    ));
+                }
+                if let Some(v) = m.params.get("normalize") {
+                    let s = as_str(v, "normalize").map_err(|e| (at("normalize"), e))?;
+                    if !matches!(s, "none" | "mean") {
+                        return Err((
+                            at("normalize"),
+                            ApplyError::new(format!(
+                                "normalize: expected \"none\" or \"mean\", found \"{s}\""
+                            )),
+                        ));
+                    }
+                }
+                if let Some(v) = m.params.get("quantity") {
+                    as_str(v, "quantity").map_err(|e| (at("quantity"), e))?;
+                }
+            }
+            "convergence" => {
+                const KNOWN: &[&str] = &["spp", "reference-spp", "quantity"];
+                if let Some(u) = m.params.unknown(KNOWN).first() {
+                    let e = crate::experiment::hooks::ParamError::unknown(u, KNOWN);
+                    return Err((
+                        name_at(u),
+                        ApplyError {
+                            message: e.message,
+                            help: e.help,
+                            on_path: false,
+                        },
+                    ));
+                }
+                let of = match m.of.as_slice() {
+                    [one] => one.as_str(),
+                    _ => {
+                        return Err((
+                            at("of"),
+                            ApplyError::new("convergence needs of=\"<measurement>\" (one simulated measurement)")
+                                .help("e.g. measure \"convergence\" of=\"sfr\" spp=(16 64 256)"),
+                        ));
+                    }
+                };
+                let t = check_measurement_ref(spec, m, of).map_err(|e| (at("of"), e))?;
+                if !CONVERGENCE_KINDS.contains(&t.kind.as_str()) || t.params.get("input").is_some()
+                {
+                    return Err((
+                        at("of"),
+                        ApplyError::new(format!(
+                            "convergence follows a rendered measurement ({}); '{of}' is a '{}'{}",
+                            CONVERGENCE_KINDS.join(", "),
+                            t.kind,
+                            if t.params.get("input").is_some() {
+                                " of a captured image"
+                            } else {
+                                ""
+                            }
+                        )),
+                    ));
+                }
+                spp_list(m).map_err(|e| (at("spp"), e))?;
+                if let Some(v) = m.params.get("reference-spp") {
+                    as_int(v, "reference-spp", 1, 1_000_000_000)
+                        .map_err(|e| (at("reference-spp"), e))?;
+                }
+                if let Some(v) = m.params.get("quantity") {
+                    as_str(v, "quantity").map_err(|e| (at("quantity"), e))?;
+                }
+            }
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
+/// Another measurement of the experiment named `name` (not `m`, not a compare/convergence).
+fn check_measurement_ref<'a>(
+    spec: &'a ResolvedExperiment,
+    m: &Measure,
+    name: &str,
+) -> Result<&'a Measure, ApplyError> {
+    let others: Vec<&str> = spec
+        .measures
+        .iter()
+        .filter(|x| x.name != m.name)
+        .map(|x| x.name.as_str())
+        .collect();
+    match spec
+        .measures
+        .iter()
+        .find(|x| x.name == name && x.name != m.name)
+    {
+        Some(t) if matches!(t.kind.as_str(), "compare" | "convergence") => {
+            Err(ApplyError::new(format!(
+                "'{name}' is a '{}' measurement; {} refers to a measurement of an image",
+                t.kind, m.kind
+            )))
+        }
+        Some(t) => Ok(t),
+        None => {
+            let mut e = ApplyError::new(format!(
+                "no measurement named '{name}' in this experiment; names: {}",
+                others.join(", ")
+            ));
+            e.help = crate::diag::did_you_mean(name, others.iter().copied())
+                .map(|s| format!("did you mean '{s}'?"));
+            Err(e)
+        }
+    }
+}
+
+/// `spp=(16 64 256)`: at least two strictly increasing sample counts.
+fn spp_list(m: &Measure) -> Result<Vec<u64>, ApplyError> {
+    let help = "e.g. spp=(16 64 256): at least two increasing sample counts";
+    let v = m
+        .params
+        .get("spp")
+        .ok_or_else(|| ApplyError::new("convergence needs spp=(…)").help(help))?;
+    let l = match v {
+        Value::List(l) => l.clone(),
+        other => {
+            return Err(ApplyError::new(format!(
+                "'spp': expected a list of sample counts, found {}",
+                describe(other)
+            ))
+            .help(help));
+        }
+    };
+    let s: Vec<u64> = l
+        .iter()
+        .map(|x| as_int(x, "spp", 1, 1_000_000_000))
+        .collect::<Result<_, _>>()?;
+    if s.len() < 2 || s.windows(2).any(|w| w[1] <= w[0]) {
+        return Err(ApplyError::new(
+            "'spp': expected at least two strictly increasing sample counts",
+        )
+        .help(help));
+    }
+    Ok(s)
+}
+
+/// Stages a measurement needs, given its properties: measurements of a
+/// captured image (`input=`), `compare` and `convergence` (which renders on
+/// its own) need none of the variant's stages.
+pub fn needs_of(m: &Measure) -> stages::Needs {
+    if m.params.get("input").is_some() || matches!(m.kind.as_str(), "compare" | "convergence") {
+        return stages::Needs::default();
+    }
+    stages::needs(&m.kind)
+}
+
+/// A captured image with its optional label map, read once per variant.
+pub struct Capture {
+    pub image: LoadedImage,
+    pub labels: Option<(Vec<u32>, Vec<String>)>,
+    pub pixel_pitch_m: Option<f64>,
+}
+
+/// Read a captured image and its label map (sizes must agree).
+pub fn load_capture(c: &MeasuredInput) -> Result<Capture> {
+    let image = read_image(&c.file.path)?;
+    let labels = match (&c.labels, &c.names) {
+        (Some(l), Some(n)) => {
+            let (w, h, labels, names) = read_label_map(&l.path, &n.path)?;
+            if (w, h) != (image.width, image.height) {
+                return Err(Error::io(
+                    &l.path,
+                    format!(
+                        "label map is {w}×{h} but the captured image {} is {}×{}",
+                        c.file.path.display(),
+                        image.width,
+                        image.height
+                    ),
+                ));
+            }
+            Some((labels, names))
+        }
+        _ => None,
+    };
+    Ok(Capture {
+        image,
+        labels,
+        pixel_pitch_m: c.pixel_um.map(|p| p * 1e-6),
+    })
+}
+
+fn prefixed(mut m: Measured, p: &str) -> Measured {
+    for f in &mut m.figures {
+        f.quantity = format!("{p}/{}", f.quantity);
+    }
+    for c in &mut m.curves {
+        c.name = format!("{p}/{}", c.name);
+    }
+    m
+}
+
+/// Run measurement `m` on the captured image `cap` (called `input`).
+pub fn measure_capture(
+    m: &Measure,
+    spec: &ResolvedExperiment,
+    input: &str,
+    cap: &Capture,
+) -> Result<Measured> {
+    let img = &cap.image;
+    let err = |e: Error| Error::io(&img.path, e);
+    let str_param = |k: &str, d: &'static str| -> Result<String> {
+        Ok(m.params
+            .str(k)
+            .map_err(Error::invalid)?
+            .unwrap_or(d)
+            .to_string())
+    };
+    let roi = match m.params.get("roi-px") {
+        Some(v) => Some(
+            roi_px(v)
+                .map_err(|e| Error::invalid(format!("measurement '{}': {}", m.name, e.message)))?,
+        ),
+        None => None,
+    };
+    let views_labels = || -> Result<&(Vec<u32>, Vec<String>)> {
+        cap.labels.as_ref().ok_or_else(|| {
+            Error::invalid(format!(
+                "measurement '{}': the captured image '{input}' has no label map",
+                m.name
+            ))
+        })
+    };
+    match m.kind.as_str() {
+        "sfr" => {
+            let channel = str_param("channel", "lum")?;
+            let plane = img.plane_for(&channel)?;
+            let opts = crate::measure::sfr::SfrOptions {
+                channel: crate::measure::sfr::SfrChannel::parse(&channel)?,
+                pixel_pitch_m: cap.pixel_pitch_m,
+                ..Default::default()
+            };
+            let mut regions = vec![];
+            match roi {
+                Some(r) => regions.push((input.to_string(), r)),
+                None => {
+                    let (labels, names) = views_labels()?;
+                    for o in &m.of {
+                        let r = crate::measure::sfr::object_roi(
+                            labels, names, img.width, img.height, o,
+                        )
+                        .map_err(err)?;
+                        regions.push((o.clone(), r));
+                    }
+                }
+            }
+            let mut out = Measured::default();
+            for (p, r) in regions {
+                let (sfr, r) = crate::measure::sfr::sfr_of_region(&plane, r, &opts).map_err(err)?;
+                let x = prefixed(sfr.measured(&m.name, r), &p);
+                out.figures.extend(x.figures);
+                out.curves.extend(x.curves);
+                out.pixels_read.extend(x.pixels_read);
+            }
+            Ok(out)
+        }
+        "mcc" => {
+            let (labels, names) = views_labels()?;
+            let chart = m.of.first().map(String::as_str).unwrap_or("mcc");
+            let patches =
+                crate::measure::mcc::patch_means(&img.views(), labels, names, chart, 0.25)
+                    .map_err(err)?;
+            Ok(crate::measure::mcc::measured(&patches, &m.name))
+        }
+        "profile" => {
+            let (labels, names) = views_labels()?;
+            let opts = crate::measure::profile::ProfileOptions {
+                step_px: if img.mosaic.is_some() { 2 } else { 1 },
+                ..Default::default()
+            };
+            crate::measure::profile::profile(&img.views(), labels, names, &m.of, &opts, &m.name)
+                .map_err(err)
+        }
+        "noise" => {
+            let channel = str_param("channel", "g")?;
+            let mut plane = img.plane_for(&channel)?;
+            if let Some(r) = roi {
+                plane = plane.crop(r).map_err(err)?;
+            }
+            let k = m
+                .params
+                .f64("conversion-gain-dv-e")
+                .map_err(Error::invalid)?
+                .ok_or_else(|| Error::invalid("noise on a capture needs conversion-gain-dv-e"))?;
+            let opts = crate::measure::noise::NoiseOptions {
+                conversion_gain_dv_per_e: k,
+                seed: spec.render.seed,
+                channel,
+                ..Default::default()
+            };
+            Ok(crate::measure::noise::measure(&plane, &opts, &m.name)
+                .map_err(err)?
+                .0)
+        }
+        "ri" => {
+            let channel = str_param("channel", "g")?;
+            let plane = img.plane_for(&channel)?;
+            let opts = crate::measure::ri::RiOptions {
+                pixel_pitch_m: cap.pixel_pitch_m,
+                channel,
+                ..Default::default()
+            };
+            crate::measure::ri::relative_illumination(&plane, &opts, &m.name).map_err(err)
+        }
+        k => Err(Error::invalid(format!(
+            "measurement '{k}' cannot read a captured image"
+        ))),
+    }
+}
+
+/// `compare`: pair the figures of measurement `of` (simulated) and
+/// `reference` by quantity and unit, optionally filtered and normalised.
+pub fn compare(m: &Measure, of: &Measured, reference: &Measured) -> Result<Measured> {
+    let filter = m.params.str("quantity").map_err(Error::invalid)?;
+    let normalize = m
+        .params
+        .str("normalize")
+        .map_err(Error::invalid)?
+        .unwrap_or("none");
+    let keep = |f: &&Figure| filter.is_none_or(|q| f.quantity.contains(q));
+    let refs: BTreeMap<&str, &Figure> = reference
+        .figures
+        .iter()
+        .filter(keep)
+        .map(|f| (f.quantity.as_str(), f))
+        .collect();
+    let mut pairs = vec![];
+    let mut unit: Option<&str> = None;
+    for f in of.figures.iter().filter(keep) {
+        let Some(r) = refs.get(f.quantity.as_str()) else {
+            continue;
+        };
+        if r.unit != f.unit {
+            continue;
+        }
+        match unit {
+            None => unit = Some(&f.unit),
+            Some(u) if u != f.unit => {
+                return Err(Error::invalid(format!(
+                    "compare '{}': the paired figures mix units ({u} and {}); keep one kind with quantity=\"…\"",
+                    m.name, f.unit
+                )));
+            }
+            _ => {}
+        }
+        pairs.push(crate::measure::compare::Pair {
+            name: f.quantity.clone(),
+            simulated: f.value,
+            reference: r.value,
+        });
+    }
+    if pairs.len() < 2 {
+        return Err(Error::invalid(format!(
+            "compare '{}': '{}' and its reference share {} figure(s) with the same quantity and unit; at least 2 are needed",
+            m.name,
+            m.of.first().map(String::as_str).unwrap_or("?"),
+            pairs.len()
+        )));
+    }
+    let mut unit = unit.unwrap_or("1").to_string();
+    if normalize == "mean" {
+        let n = pairs.len() as f64;
+        let ms = pairs.iter().map(|p| p.simulated).sum::<f64>() / n;
+        let mr = pairs.iter().map(|p| p.reference).sum::<f64>() / n;
+        if ms == 0.0 || mr == 0.0 {
+            return Err(Error::invalid(format!(
+                "compare '{}': normalize=\"mean\" with a zero mean",
+                m.name
+            )));
+        }
+        for p in &mut pairs {
+            p.simulated /= ms;
+            p.reference /= mr;
+        }
+        unit = "1".into();
+    }
+    let mut out = crate::measure::compare::compare(&pairs, &unit, &m.name)?;
+    out.figures
+        .push(Figure::new(&m.name, "pairs", "1", pairs.len() as f64, 0.0));
+    Ok(out)
+}
+
+/// `convergence`: render the target measurement's region at each spp and
+/// follow each of its figures' standard error against render time.
+pub fn convergence(m: &Measure, spec: &ResolvedExperiment) -> Result<Measured> {
+    let bad = |e: ApplyError| Error::invalid(format!("measurement '{}': {}", m.name, e.message));
+    let spps = spp_list(m).map_err(bad)?;
+    let of =
+        m.of.first()
+            .ok_or_else(|| Error::invalid("convergence needs of=\"<measurement>\""))?;
+    let target = spec
+        .measures
+        .iter()
+        .find(|x| &x.name == of)
+        .ok_or_else(|| Error::invalid(format!("convergence: no measurement '{of}'")))?;
+    let filter = m.params.str("quantity").map_err(Error::invalid)?;
+    let reference_spp = match m.params.get("reference-spp") {
+        Some(v) => Some(as_int(v, "reference-spp", 1, 1_000_000_000).map_err(bad)?),
+        None => None,
+    };
+    let mut sub = spec.clone();
+    sub.measures = vec![target.clone()];
+    let scene = stages::build_scene(&sub)?;
+    let camera = stages::build_camera(&sub, &scene)?;
+    let need = stages::needs(&target.kind);
+    let run_at = |spp: u64, seed: u64| -> Result<(Vec<Figure>, f64)> {
+        let mut s = sub.clone();
+        s.render.spp = spp;
+        s.render.seed = seed;
+        let t = Instant::now();
+        let r = stages::render(&s, &scene, camera.as_ref())?;
+        let dt = t.elapsed().as_secs_f64();
+        let oi = r.oi;
+        let si = if need.sensor_image {
+            Some(stages::simulate_sensor(&s, &oi)?)
+        } else {
+            None
+        };
+        Ok((
+            stages::measure(target, &s, Some(&oi), si.as_ref(), &r.object_rects)?.figures,
+            dt,
+        ))
+    };
+    let mut runs = vec![];
+    for (k, &spp) in spps.iter().enumerate() {
+        runs.push((spp, run_at(spp, spec.render.seed + 1 + k as u64)?));
+    }
+    let reference = match reference_spp {
+        Some(r) => Some(run_at(r, spec.render.seed)?.0),
+        None => None,
+    };
+    let mut out = Measured::default();
+    for (spp, (_, dt)) in &runs {
+        out.figures.push(Figure::new(
+            &m.name,
+            format!("spp{spp}/render_s"),
+            "s",
+            *dt,
+            0.0,
+        ));
+    }
+    let matches = |q: &str| filter.is_none_or(|f| q.contains(f));
+    let mut followed = 0;
+    for f0 in runs[0].1.0.iter().filter(|f| matches(&f.quantity)) {
+        let q = &f0.quantity;
+        let (spp_of, series): (Vec<u64>, Vec<crate::measure::convergence::Run>) = runs
+            .iter()
+            .filter_map(|(spp, (figs, dt))| {
+                let f = figs
+                    .iter()
+                    .find(|f| &f.quantity == q && f.unit == f0.unit)?;
+                Some((
+                    *spp,
+                    crate::measure::convergence::Run {
+                        render_s: *dt,
+                        value: f.value,
+                        stderr: f.stderr,
+                    },
+                ))
+            })
+            .unzip();
+        if series
+            .iter()
+            .filter(|r| r.stderr > 0.0 && r.render_s > 0.0)
+            .count()
+            < 2
+        {
+            continue; // an exact figure (no standard error) has nothing to converge
+        }
+        let rv = reference
+            .as_ref()
+            .and_then(|r| r.iter().find(|f| &f.quantity == q))
+            .map(|f| f.value);
+        let mut c = crate::measure::convergence::convergence(&series, rv, q, &f0.unit, &m.name)?;
+        for (spp, r) in spp_of.iter().zip(&series) {
+            c.figures.push(Figure::new(
+                &m.name,
+                format!("{q}/spp{spp}_stderr"),
+                &f0.unit,
+                r.stderr,
+                0.0,
+            ));
+        }
+        for cv in &mut c.curves {
+            cv.name = format!("{q}/{}", cv.name);
+        }
+        out.figures.extend(c.figures);
+        out.curves.extend(c.curves);
+        followed += 1;
+    }
+    if followed == 0 {
+        return Err(Error::invalid(format!(
+            "convergence '{}': no figure of '{of}'{} has a standard error in ≥ 2 runs",
+            m.name,
+            filter
+                .map(|q| format!(" matching quantity=\"{q}\""))
+                .unwrap_or_default()
+        )));
+    }
+    Ok(out)
+}
+
+/// Run every measurement of a variant, in dependency order (compare last),
+/// and return their results in file order. Captured images are read once.
+pub fn measure_all(
+    spec: &ResolvedExperiment,
+    oi: Option<&OpticalImage>,
+    si: Option<&SensorImage>,
+    object_rects: &BTreeMap<String, Rect>,
+) -> Result<Vec<Measured>> {
+    let mut caps: BTreeMap<String, Capture> = BTreeMap::new();
+    let mut done: Vec<Option<Measured>> = vec![None; spec.measures.len()];
+    for pass in 0..2 {
+        for (i, m) in spec.measures.iter().enumerate() {
+            if (m.kind == "compare") != (pass == 1) {
+                continue;
+            }
+            let r = if m.kind == "compare" {
+                let get = |name: &str| -> Result<&Measured> {
+                    spec.measures
+                        .iter()
+                        .position(|x| x.name == name)
+                        .and_then(|k| done[k].as_ref())
+                        .ok_or_else(|| {
+                            Error::invalid(format!("compare '{}': no results of '{name}'", m.name))
+                        })
+                };
+                let of = m.of.first().map(String::as_str).unwrap_or("");
+                let reference = m
+                    .params
+                    .str("reference")
+                    .map_err(Error::invalid)?
+                    .unwrap_or("");
+                compare(m, get(of)?, get(reference)?)?
+            } else if m.kind == "convergence" {
+                convergence(m, spec)?
+            } else if let Some(input) = m.params.str("input").map_err(Error::invalid)? {
+                let c = spec.measured_input(input).ok_or_else(|| {
+                    Error::invalid(format!(
+                        "measurement '{}': unknown measured input '{input}'",
+                        m.name
+                    ))
+                })?;
+                if !caps.contains_key(input) {
+                    caps.insert(input.to_string(), load_capture(c)?);
+                }
+                measure_capture(m, spec, input, &caps[input])?
+            } else {
+                stages::measure(m, spec, oi, si, object_rects)?
+            };
+            done[i] = Some(r);
+        }
+    }
+    Ok(done.into_iter().map(Option::unwrap_or_default).collect())
+}
