@@ -155,7 +155,8 @@ pub fn trace(
             if let Some(ls) = world.sample_light(p, u0, u1, u2, &mut sc.li) {
                 let wi = frame.to_local(ls.wi);
                 if wi.z > 0.0 && ls.wi.dot(ng_s) > 0.0 {
-                    let pdf_b = bsdf.eval(wo, wi, &mut sc.f);
+                    // The BSDF is evaluated only for unoccluded samples (below):
+                    // it draws no random numbers, so the result is unchanged.
                     let origin = offset_ray_origin(p, p_err, ng_s, ls.wi);
                     let visible = match ls.target {
                         Some((pl, err_l, nl)) => {
@@ -178,6 +179,7 @@ pub fn trace(
                         None => world.accel.unoccluded(origin, ls.wi, f32::INFINITY),
                     };
                     if visible {
+                        let pdf_b = bsdf.eval(wo, wi, &mut sc.f);
                         let w = if ls.delta {
                             1.0
                         } else {
