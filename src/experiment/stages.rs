@@ -455,29 +455,15 @@ fn roi_of_objects(
     let mut roi: Option<Rect> = None;
     let mut rects = BTreeMap::new();
     for (name, strip) in objects {
-        let ids: Vec<u32> = img
-            .label_names
-            .iter()
-            .enumerate()
-            .filter(|(_, n)| object_matches(n, name))
-            .map(|(i, _)| i as u32)
-            .collect();
-        let (mut x0, mut y0, mut x1, mut y1) = (u32::MAX, u32::MAX, 0u32, 0u32);
-        for y in 0..img.height() {
-            for x in 0..img.width() {
-                if ids.contains(&img.labels[(y * img.width() + x) as usize]) {
-                    x0 = x0.min(x);
-                    y0 = y0.min(y);
-                    x1 = x1.max(x + 1);
-                    y1 = y1.max(y + 1);
-                }
-            }
-        }
-        if x0 == u32::MAX {
-            return Err(Error::invalid(format!(
-                "object '{name}' is not visible from the camera"
-            )));
-        }
+        let b = label_box(
+            &img.labels,
+            &img.label_names,
+            img.width(),
+            img.height(),
+            name,
+        )
+        .ok_or_else(|| Error::invalid(format!("object '{name}' is not visible from the camera")))?;
+        let (x0, y0, x1, y1) = (b.x, b.y, b.x + b.w, b.y + b.h);
         let fx0 = (x0.saturating_sub(2) * k).min(film.width_px - 1);
         let fy0 = (y0.saturating_sub(2) * k).min(film.height_px - 1);
         let fx1 = ((x1 + 2) * k).min(film.width_px);
@@ -537,8 +523,9 @@ pub fn simulate_sensor(spec: &ResolvedExperiment, oi: &OpticalImage) -> Result<S
     crate::sensor::simulate(&cfg, oi, spec.render.seed)
 }
 
-/// Bounding box (window coordinates) of the pixels labelled `name` (or below it).
-fn label_box(labels: &[u32], names: &[String], w: u32, h: u32, name: &str) -> Result<Rect> {
+/// Bounding box (window coordinates) of the pixels labelled `name` (or below
+/// it); None when no pixel carries it.
+fn label_box(labels: &[u32], names: &[String], w: u32, h: u32, name: &str) -> Option<Rect> {
     let ids: Vec<u32> = names
         .iter()
         .enumerate()
@@ -556,12 +543,7 @@ fn label_box(labels: &[u32], names: &[String], w: u32, h: u32, name: &str) -> Re
             }
         }
     }
-    if x0 == u32::MAX {
-        return Err(Error::invalid(format!(
-            "object '{name}' is not in the measured image"
-        )));
-    }
-    Ok(Rect::new(x0, y0, x1 - x0, y1 - y0))
+    (x0 != u32::MAX).then(|| Rect::new(x0, y0, x1 - x0, y1 - y0))
 }
 
 fn prefixed(mut m: Measured, obj: &str) -> Measured {
@@ -627,13 +609,14 @@ pub fn measure(
                         }
                         Rect::new(x0 - w.x, y0 - w.y, x1 - x0, y1 - y0)
                     }
-                    None => edge_strip(label_box(
-                        &si.labels,
-                        &si.label_names,
-                        si.width(),
-                        si.height(),
-                        obj,
-                    )?),
+                    None => edge_strip(
+                        label_box(&si.labels, &si.label_names, si.width(), si.height(), obj)
+                            .ok_or_else(|| {
+                                Error::invalid(format!(
+                                    "object '{obj}' is not in the measured image"
+                                ))
+                            })?,
+                    ),
                 };
                 let (sfr, roi) = crate::measure::sfr::sfr_of_region(&plane, roi, &opts)?;
                 let r = prefixed(sfr.measured(&m.name, roi), obj);
