@@ -202,7 +202,7 @@ pub fn run(spp: u32, ref_spp: u32, threads: usize, bands: usize) -> Result<Strin
         settings.grid.len()
     );
     let mut timed = None;
-    for kind in [BvhKind::Bvh2, BvhKind::Cwbvh] {
+    for kind in [BvhKind::Bvh4, BvhKind::Bvh2, BvhKind::Cwbvh] {
         let world = World::build(&scene, &settings.grid, kind)?;
         let cpu0 = cpu_time_s();
         let img = render_world(&world, &cam, &to_world, &film, &settings, names.clone())?;
@@ -219,12 +219,12 @@ pub fn run(spp: u32, ref_spp: u32, threads: usize, bands: usize) -> Result<Strin
             paths / cpu / 1e6,
             img.nan_count
         );
-        if kind == BvhKind::Bvh2 {
+        if kind == BvhKind::Bvh4 {
             timed = Some(img);
         }
     }
     let timed = timed.expect("rendered");
-    let world = World::build(&scene, &settings.grid, BvhKind::Bvh2)?;
+    let world = World::build(&scene, &settings.grid, BvhKind::Bvh4)?;
     let rs = RenderSettings {
         spp: ref_spp,
         seed: 0xC0FFEE,

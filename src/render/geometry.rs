@@ -14,7 +14,10 @@
 //! - Spheres and disks are intersected in f64 and the hit point is re-projected
 //!   onto the surface; the bound then covers the final rounding to f32.
 //!
-//! BVH choice: obvhs BVH2. Measured with `camsim bench render` (Mitsuba
+//! BVH choice: the renderer uses `BvhKind::Bvh4` (`bvh4.rs`: obvhs' SAH BVH2
+//! collapsed to 4-wide nodes, SSE box and 4-triangle tests), ≈ 1.2× the paths
+//! per CPU-second of obvhs' BVH2 traversal on the bench scene. The notes below
+//! chose between obvhs' own layouts. Measured with `camsim bench render` (Mitsuba
 //! `cornell_box()`, 256², 16 spp, 31 bands, 2 threads, this shared 2-core
 //! machine): BVH2 0.517 M paths per CPU-second, CWBVH 0.514 (single-thread
 //! runs: 0.46 vs 0.48) — no meaningful speed difference for scenes this
@@ -111,10 +114,10 @@ pub struct PrimHit {
 #[derive(Clone, Copy, Debug)]
 pub struct TriRay {
     pub o: Vec3,
-    kz: u8,
-    sx: f32,
-    sy: f32,
-    sz: f32,
+    pub(crate) kz: u8,
+    pub(crate) sx: f32,
+    pub(crate) sy: f32,
+    pub(crate) sz: f32,
 }
 
 #[inline(always)]
@@ -384,9 +387,13 @@ pub fn offset_ray_origin(p: Vec3, p_err: Vec3, n: Vec3, w: Vec3) -> Vec3 {
 pub enum BvhKind {
     Bvh2,
     Cwbvh,
+    /// 4-wide SSE BVH (`bvh4.rs`), the renderer's default; falls back to
+    /// BVH2 for a tree too deep for its fixed traversal stack.
+    Bvh4,
 }
 
 enum Tree {
+    Four(super::bvh4::Bvh4),
     Two(Bvh2),
     Cw(CwBvh),
     Empty,
@@ -421,6 +428,10 @@ impl Accel {
         params.max_prims_per_leaf = 2;
         params.collapse_traversal_cost = 1.0;
         let tree = match kind {
+            BvhKind::Bvh4 => match super::bvh4::Bvh4::build(&shapes) {
+                Some(b) => Tree::Four(b),
+                None => Tree::Two(obvhs::bvh2::builder::build_bvh2(&shapes, params, &mut t)),
+            },
             BvhKind::Bvh2 => Tree::Two(obvhs::bvh2::builder::build_bvh2(&shapes, params, &mut t)),
             BvhKind::Cwbvh => Tree::Cw(obvhs::cwbvh::builder::build_cwbvh(&shapes, params, &mut t)),
         };
@@ -430,6 +441,11 @@ impl Accel {
     /// Closest hit along `o + t·d`, t ∈ (0, tmax).
     #[inline]
     pub fn intersect(&self, o: Vec3, d: Vec3, tmax: f32) -> Option<Hit> {
+        if let Tree::Four(b) = &self.tree {
+            return b
+                .intersect(&self.shapes, o, d, tmax)
+                .map(|(prim, h)| Hit { prim, h });
+        }
         let ray = Ray::new(Vec3A::from(o), Vec3A::from(d), 0.0, tmax);
         let mut best = PrimHit {
             t: tmax,
@@ -457,7 +473,7 @@ impl Accel {
             Tree::Cw(b) => {
                 b.ray_traverse(ray, &mut hit, |r, i| f(r, i, &b.primitive_indices));
             }
-            Tree::Empty => {}
+            Tree::Empty | Tree::Four(_) => {}
         }
         (best_prim != u32::MAX).then_some(Hit {
             prim: best_prim,
@@ -468,6 +484,9 @@ impl Accel {
     /// True when nothing blocks `o + t·d` for t ∈ (0, tmax).
     #[inline]
     pub fn unoccluded(&self, o: Vec3, d: Vec3, tmax: f32) -> bool {
+        if let Tree::Four(b) = &self.tree {
+            return b.unoccluded(&self.shapes, o, d, tmax);
+        }
         let ray = Ray::new(Vec3A::from(o), Vec3A::from(d), 0.0, tmax);
         let shapes = &self.shapes;
         let tr = TriRay::new(o, d);
@@ -480,7 +499,7 @@ impl Accel {
         match &self.tree {
             Tree::Two(b) => b.ray_traverse_miss(ray, |r, i| f(r, i, &b.primitive_indices)),
             Tree::Cw(b) => b.ray_traverse_miss(ray, |r, i| f(r, i, &b.primitive_indices)),
-            Tree::Empty => true,
+            Tree::Empty | Tree::Four(_) => true,
         }
     }
 }

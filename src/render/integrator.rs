@@ -24,7 +24,6 @@ pub struct Scratch {
     pub beta: Vec<f32>,
     pub l: Vec<f32>,
     f: Vec<f32>,
-    li: Vec<f32>,
 }
 
 impl Scratch {
@@ -33,7 +32,6 @@ impl Scratch {
             beta: vec![0.0; nb],
             l: vec![0.0; nb],
             f: vec![0.0; nb],
-            li: vec![0.0; nb],
         }
     }
 }
@@ -108,7 +106,7 @@ pub fn trace(
                 let w = if specular {
                     1.0
                 } else {
-                    let pl = world.area_light_pdf(info.light, hit.prim, hit.h.t * dlen, cos_l);
+                    let pl = world.area_light_pdf(info.light, hit.h.t * dlen, cos_l);
                     power_heuristic(prev_pdf, pl)
                 };
                 add_scaled(&mut sc.l, &sc.beta, le, w);
@@ -149,15 +147,19 @@ pub fn trace(
             hero = Some(b);
         }
 
+        // Ray origin for directions on the front side of `ng_s`: shared by the
+        // shadow ray and a reflected continuation ray.
+        let origin_front = offset_ray_origin(p, p_err, ng_s, ng_s);
+
         // Next-event estimation.
         if !bsdf.is_delta() && wo.z > 0.0 {
             let (u0, u1, u2) = (rng.uniform(), rng.uniform(), rng.uniform());
-            if let Some(ls) = world.sample_light(p, u0, u1, u2, &mut sc.li) {
+            if let Some(ls) = world.sample_light(p, u0, u1, u2) {
                 let wi = frame.to_local(ls.wi);
                 if wi.z > 0.0 && ls.wi.dot(ng_s) > 0.0 {
                     // The BSDF is evaluated only for unoccluded samples (below):
                     // it draws no random numbers, so the result is unchanged.
-                    let origin = offset_ray_origin(p, p_err, ng_s, ls.wi);
+                    let origin = origin_front;
                     let visible = match ls.target {
                         Some((pl, err_l, nl)) => {
                             let tgt = if nl == Vec3::ZERO {
@@ -185,9 +187,9 @@ pub fn trace(
                         } else {
                             power_heuristic(ls.pdf, pdf_b)
                         };
-                        let s = wi.z * w / ls.pdf;
+                        let s = wi.z * w * ls.scale / ls.pdf;
                         for (((o, &b), &f), &e) in
-                            sc.l.iter_mut().zip(&sc.beta).zip(&sc.f).zip(&sc.li)
+                            sc.l.iter_mut().zip(&sc.beta).zip(&sc.f).zip(ls.spec)
                         {
                             *o += b * f * e * s;
                         }
@@ -217,7 +219,11 @@ pub fn trace(
         specular = bs.delta;
         prev_pdf = bs.pdf;
         eta_scale *= bs.eta_scale;
-        o = offset_ray_origin(p, p_err, ng_s, wi_w);
+        o = if wi_w.dot(ng_s) >= 0.0 {
+            origin_front
+        } else {
+            offset_ray_origin(p, p_err, ng_s, wi_w)
+        };
         d = wi_w;
         depth += 1;
         // Russian roulette on the throughput with refraction scaling undone.

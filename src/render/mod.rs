@@ -43,6 +43,7 @@
 
 pub mod bench;
 pub mod bsdf;
+pub mod bvh4;
 pub mod film;
 pub mod geometry;
 pub mod integrator;
@@ -99,7 +100,7 @@ pub fn render(
     film: &FilmSpec,
     settings: &RenderSettings,
 ) -> Result<OpticalImage> {
-    let world = World::build(scene, &settings.grid, BvhKind::Bvh2)?; // see geometry.rs: CWBVH is not scale-robust
+    let world = World::build(scene, &settings.grid, BvhKind::Bvh4)?; // see geometry.rs and bvh4.rs
     let to_world = scene
         .camera
         .as_ref()
@@ -119,7 +120,7 @@ pub fn render_regions(
     settings: &RenderSettings,
     regions: &[Rect],
 ) -> Result<Vec<OpticalImage>> {
-    let world = World::build(scene, &settings.grid, BvhKind::Bvh2)?;
+    let world = World::build(scene, &settings.grid, BvhKind::Bvh4)?;
     let to_world = scene
         .camera
         .as_ref()

@@ -32,6 +32,8 @@ pub enum LightKind {
         prim: u32,
         le: Vec<f32>,
         two_sided: bool,
+        /// Surface area of the primitive (m²), precomputed for the pdfs.
+        area: f32,
     },
     Point {
         p: Vec3,
@@ -53,8 +55,11 @@ pub enum LightKind {
     },
 }
 
-/// A light sample seen from a shading point.
-pub struct LightSample {
+/// A light sample seen from a shading point. The incident spectral radiance
+/// (or irradiance, for delta lights) is `scale · spec`.
+pub struct LightSample<'a> {
+    pub spec: &'a [f32],
+    pub scale: f32,
     /// Unit direction towards the light.
     pub wi: Vec3,
     /// Solid-angle pdf including the light selection probability (delta: the
@@ -327,6 +332,7 @@ impl World {
                 prim: *prim as u32,
                 le,
                 two_sided: e.two_sided,
+                area: shapes[*prim].area(),
             });
             power.push(pw);
         }
@@ -426,14 +432,7 @@ impl World {
 
     /// Pick a light and sample a direction to it from point `p`. Radiance
     /// arriving at `p` (unoccluded) is written to `li`.
-    pub fn sample_light(
-        &self,
-        p: Vec3,
-        u0: f32,
-        u1: f32,
-        u2: f32,
-        li: &mut [f32],
-    ) -> Option<LightSample> {
+    pub fn sample_light(&self, p: Vec3, u0: f32, u1: f32, u2: f32) -> Option<LightSample<'_>> {
         if self.lights.is_empty() {
             return None;
         }
@@ -447,6 +446,7 @@ impl World {
                 prim,
                 le,
                 two_sided,
+                area,
             } => {
                 let shape = &self.accel.shapes[*prim as usize];
                 let (pl, err, nl) = match *shape {
@@ -491,12 +491,13 @@ impl World {
                 if !(cos_l > 0.0) {
                     return None;
                 }
-                let pdf = sel * dist2 / (cos_l * shape.area());
+                let pdf = sel * dist2 / (cos_l * area);
                 if !(pdf > 0.0) || !pdf.is_finite() {
                     return None;
                 }
-                li.copy_from_slice(le);
                 Some(LightSample {
+                    spec: le,
+                    scale: 1.0,
                     wi,
                     pdf,
                     delta: false,
@@ -509,11 +510,9 @@ impl World {
                 if !(dist2 > 0.0) {
                     return None;
                 }
-                let s = 1.0 / dist2;
-                for (o, &x) in li.iter_mut().zip(i) {
-                    *o = x * s;
-                }
                 Some(LightSample {
+                    spec: i,
+                    scale: 1.0 / dist2,
                     wi: d / dist2.sqrt(),
                     pdf: sel,
                     delta: true,
@@ -538,30 +537,28 @@ impl World {
                 if fall <= 0.0 {
                     return None;
                 }
-                let s = fall / dist2;
-                for (o, &x) in li.iter_mut().zip(i) {
-                    *o = x * s;
-                }
                 Some(LightSample {
+                    spec: i,
+                    scale: fall / dist2,
                     wi,
                     pdf: sel,
                     delta: true,
                     target: Some((*lp, Vec3::ZERO, Vec3::ZERO)),
                 })
             }
-            LightKind::Distant { dir, e } => {
-                li.copy_from_slice(e);
-                Some(LightSample {
-                    wi: -*dir,
-                    pdf: sel,
-                    delta: true,
-                    target: None,
-                })
-            }
+            LightKind::Distant { dir, e } => Some(LightSample {
+                spec: e,
+                scale: 1.0,
+                wi: -*dir,
+                pdf: sel,
+                delta: true,
+                target: None,
+            }),
             LightKind::Infinite { l } => {
-                li.copy_from_slice(l);
                 let wi = uniform_sphere(u1, u2);
                 Some(LightSample {
+                    spec: l,
+                    scale: 1.0,
                     wi,
                     pdf: sel / (4.0 * PI),
                     delta: false,
@@ -574,8 +571,10 @@ impl World {
     /// Solid-angle pdf with which `sample_light` would have produced the hit
     /// on area light `light` at distance `dist` with cosine `cos_l` there.
     #[inline]
-    pub fn area_light_pdf(&self, light: u32, prim: u32, dist: f32, cos_l: f32) -> f32 {
-        let area = self.accel.shapes[prim as usize].area();
+    pub fn area_light_pdf(&self, light: u32, dist: f32, cos_l: f32) -> f32 {
+        let LightKind::Area { area, .. } = self.lights[light as usize] else {
+            return 0.0;
+        };
         self.light_pmf[light as usize] * dist * dist / (cos_l.abs() * area)
     }
 }
