@@ -50,7 +50,7 @@ use crate::optics::pinhole::Pinhole;
 use crate::optics::{Camera, CameraRay};
 use crate::scene::shapes::{cuboid, quad};
 use crate::scene::{
-    CameraModel, CameraPose, CameraSpec, Emission, FilmSpec, Material, Scene, look_at_to_world,
+    CameraModel, CameraSpec, Emission, FilmSpec, Material, Scene,
 };
 use crate::spectrum::{Extrapolation, Spectrum, library};
 use crate::{Error, Result};
@@ -242,12 +242,18 @@ pub fn mitsuba_cornell_box() -> (Scene, FilmSpec) {
         o,
         None,
     ));
-    let to_world = look_at_to_world(&CameraPose {
-        position: DVec3::new(0.0, 0.0, 3.9),
-        look_at: DVec3::ZERO,
-        up: DVec3::Y,
-    })
-    .expect("pose");
+    // Mitsuba's sensor: at (0, 0, 3.9) looking down −z, up +y, in a
+    // right-handed world where the red wall (x = −1) appears on the image's
+    // left. camsim's camera frame is pbrt's (left-handed: +x = image right),
+    // and `look_at_to_world` builds pbrt's LookAt, whose +x would be world −x
+    // here (a mirrored image, as pbrt gives without `Scale -1 1 1`). So the
+    // camera matrix is written out: camera +x → world +x, +y → +y, +z → −z.
+    let to_world = DMat4::from_cols(
+        DVec3::X.extend(0.0),
+        DVec3::Y.extend(0.0),
+        DVec3::NEG_Z.extend(0.0),
+        DVec3::new(0.0, 0.0, 3.9).extend(1.0),
+    );
     s.camera = Some(CameraSpec {
         to_world,
         model: CameraModel::Pinhole {
