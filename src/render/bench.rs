@@ -49,9 +49,7 @@ use crate::optical_image::OpticalImage;
 use crate::optics::pinhole::Pinhole;
 use crate::optics::{Camera, CameraRay};
 use crate::scene::shapes::{cuboid, quad};
-use crate::scene::{
-    CameraModel, CameraSpec, Emission, FilmSpec, Material, Scene,
-};
+use crate::scene::{CameraModel, CameraSpec, Emission, FilmSpec, Material, Scene};
 use crate::spectrum::{Extrapolation, Spectrum, library};
 use crate::{Error, Result};
 use glam::{DMat4, DVec2, DVec3};
@@ -59,13 +57,21 @@ use std::path::{Path, PathBuf};
 
 /// Jakob–Hanika sigmoid polynomial coefficients (c₀, c₁, c₂), λ in nm, as
 /// Mitsuba 3.9.1's `srgb_model_fetch` returns them.
-pub const JH_WHITE: [f64; 3] = [3.450432632234879e-05, -0.033416666090488434, 8.416033744812012];
+pub const JH_WHITE: [f64; 3] = [
+    3.450432632234879e-05,
+    -0.033416666090488434,
+    8.416033744812012,
+];
 pub const JH_GREEN: [f64; 3] = [
     -0.00015634791634511203,
     0.16951896250247955,
     -46.169395446777344,
 ];
-pub const JH_RED: [f64; 3] = [0.0001366714423056692, -0.13359785079956055, 30.404735565185547];
+pub const JH_RED: [f64; 3] = [
+    0.0001366714423056692,
+    -0.13359785079956055,
+    30.404735565185547,
+];
 /// The light's RGB (18.387, 13.9873, 6.75357) divided by its scale 2·18.387.
 pub const JH_LIGHT: [f64; 3] = [
     -1.8160400941269472e-05,
@@ -133,10 +139,9 @@ struct RadiancePinhole(Pinhole);
 
 impl Camera for RadiancePinhole {
     fn sample_ray(&self, film_m: DVec2, u: DVec2, lambda_nm: f64) -> Option<CameraRay> {
-        self.0.sample_ray(film_m, u, lambda_nm).map(|r| CameraRay {
-            weight: 1.0,
-            ..r
-        })
+        self.0
+            .sample_ray(film_m, u, lambda_nm)
+            .map(|r| CameraRay { weight: 1.0, ..r })
     }
     fn describe(&self) -> String {
         format!("radiance {}", self.0.describe())
@@ -618,7 +623,13 @@ mod tests {
         };
         let d65 = library::named("cie-d65").unwrap();
         let k = d65_unit_luminance_scale();
-        let mut img = OpticalImage::new(1, 1, crate::optical_image::Rect::new(0, 0, 1, 1), 1e-5, grid.clone());
+        let mut img = OpticalImage::new(
+            1,
+            1,
+            crate::optical_image::Rect::new(0, 0, 1, 1),
+            1e-5,
+            grid.clone(),
+        );
         for b in 0..31 {
             img.irradiance[b] = (k * d65.eval(grid.wavelength(b))) as f32;
         }
