@@ -162,9 +162,16 @@ def main():
     mi, dr, variant, scene = load_mitsuba(a.threads)
     print(f"Mitsuba {mi.__version__} {variant}, {a.threads} threads; scene cornell_box(), {W}×{H}, max_depth 7, box filter")
     print("  Jakob–Hanika coefficients (must equal camsim's src/render/bench.rs JH_*):")
-    for name, rgb in (("white", [0.885809, 0.698859, 0.666422]), ("green", [0.105421, 0.37798, 0.076425]),
-                      ("red", [0.570068, 0.0430135, 0.0443706]), ("light/36.774", [18.387 / 36.774, 13.9873 / 36.774, 6.75357 / 36.774])):
-        print(f"    {name}: {[float(x) for x in mi.srgb_model_fetch(rgb)]}")
+    bench_rs = open(os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "src", "render", "bench.rs")).read()
+    for name, rgb in (("WHITE", [0.885809, 0.698859, 0.666422]), ("GREEN", [0.105421, 0.37798, 0.076425]),
+                      ("RED", [0.570068, 0.0430135, 0.0443706]), ("LIGHT", [18.387 / 36.774, 13.9873 / 36.774, 6.75357 / 36.774])):
+        c = [float(x) for x in mi.srgb_model_fetch(rgb)]
+        m = re.search(r"JH_" + name + r": \[f64; 3\] = \[([^\]]*)\]", bench_rs)
+        ours = [float(x) for x in m.group(1).replace(",", " ").split()] if m else None
+        same = ours is not None and np.allclose(c, ours, rtol=1e-6, atol=0)
+        print(f"    {name.lower()}: {c} {'= camsim' if same else 'DIFFERS from camsim ' + str(ours)}")
+        if not same:
+            print("WARNING: camsim's bench scene does not use this Mitsuba's spectra; update JH_* in src/render/bench.rs", file=sys.stderr)
     print(f"  load average: {os.getloadavg()[0]:.1f} (2-core machine; wall-clock rates depend on it)", flush=True)
 
     key = f"mitsuba-{mi.__version__}-{variant}-{a.ref_spp}spp-{a.ref_batches}b"
