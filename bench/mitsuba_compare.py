@@ -15,8 +15,8 @@ Equal time: camsim gets the spp that fits in Mitsuba's measured wall time
 sqrt(t_camsim / t_mitsuba) (RMSE of an unbiased estimator ~ 1/sqrt(time)) to
 remove the small leftover time mismatch. The same is reported with CPU
 time, which is less sensitive to the load of a shared machine. Each timed
-measurement is repeated with seeds 1 and 2 (times and MSEs averaged): one
-image's RMSE scatters by ±5 % between seeds, because most of it comes from a
+measurement is repeated with seeds 1..4 (times and MSEs averaged; ± is the
+standard error from their spread): one image's RMSE scatters by ±5 %, because most of it comes from a
 few hundred pixels on the emitter's edge. RMSE is reported over all pixels
 and over all but the emitter ±2 px ("light transport").
 
@@ -156,6 +156,7 @@ def main():
     ap.add_argument("--ref-batches", type=int, default=8)
     ap.add_argument("--camsim-conv-spp", type=int, default=256, help="per half of camsim's converged image (0: skip)")
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--seeds", type=int, default=4, help="independent timed renders per measurement")
     a = ap.parse_args()
     os.makedirs(a.cache, exist_ok=True)
 
@@ -216,11 +217,17 @@ def main():
     masks = {"all pixels": np.ones_like(light), "light transport (emitter ±2 px excluded)": ~near}
 
     def rmses(imgs):
-        """Relative RMSE per mask, MSE averaged over the seeds' images."""
-        return {k: np.sqrt(max(np.mean([np.mean(((y - ref) ** 2 - var)[m]) for y in imgs]), 0.0)) / ref[m].mean()
-                for k, m in masks.items()}
+        """Relative RMSE per mask (MSE averaged over the seeds' images) and its
+        relative standard error from the seed-to-seed spread."""
+        out = {}
+        for k, m in masks.items():
+            mse = np.array([np.mean(((y - ref) ** 2 - var)[m]) for y in imgs])
+            mean = max(mse.mean(), 1e-30)
+            se = mse.std(ddof=1) / np.sqrt(len(mse)) if len(mse) > 1 else 0.0
+            out[k] = (np.sqrt(mean) / ref[m].mean(), 0.5 * se / mean)
+        return out
 
-    seeds = (1, 2)
+    seeds = tuple(range(1, a.seeds + 1))
     paths = W * H * a.spp
     # Mitsuba timed (kernel compiled by a warm-up render of the same spp).
     mitsuba_y(mi, dr, scene, a.spp, 0)
@@ -253,13 +260,16 @@ def main():
     print("relative RMSE of CIE Y against the converged Mitsuba reference:")
     res = {}
     for k in masks:
-        eq_wall = re_[k] * np.sqrt(te / tm)
-        eq_cpu = rc[k] * np.sqrt(cc / cm)
-        res[k] = (rc[k] / rm[k], eq_wall / rm[k], eq_cpu / rm[k])
+        eq_wall = re_[k][0] * np.sqrt(te / tm)
+        eq_cpu = rc[k][0] * np.sqrt(cc / cm)
+        res[k] = (rc[k][0] / rm[k][0], eq_wall / rm[k][0], eq_cpu / rm[k][0])
+        # Relative standard errors of the ratios (seed-to-seed spread).
+        se_spp = np.hypot(rc[k][1], rm[k][1])
+        se_time = np.hypot(re_[k][1], rm[k][1])
         print(f"  {k}:")
-        print(f"    equal spp ({a.spp}): Mitsuba {rm[k] * 100:.2f} %, camsim {rc[k] * 100:.2f} %  → camsim/Mitsuba {rc[k] / rm[k]:.3f}")
-        print(f"    equal time ({tm:.2f} s wall): Mitsuba {rm[k] * 100:.2f} %, camsim {eq_wall * 100:.2f} % ({spp_eq} spp, measured {re_[k] * 100:.2f} % in {te:.2f} s) "
-              f"→ camsim/Mitsuba {eq_wall / rm[k]:.3f}; at equal CPU time {eq_cpu / rm[k]:.3f}")
+        print(f"    equal spp ({a.spp}): Mitsuba {rm[k][0] * 100:.2f} %, camsim {rc[k][0] * 100:.2f} %  → camsim/Mitsuba {res[k][0]:.3f} ± {res[k][0] * se_spp:.3f}")
+        print(f"    equal time ({tm:.2f} s wall): Mitsuba {rm[k][0] * 100:.2f} %, camsim {eq_wall * 100:.2f} % ({spp_eq} spp, measured {re_[k][0] * 100:.2f} % in {te:.2f} s) "
+              f"→ camsim/Mitsuba {res[k][1]:.3f} ± {res[k][1] * se_time:.3f}; at equal CPU time {res[k][2]:.3f}")
     k_all, k_lt = list(masks)
     print()
     print(f"RATIO camsim/Mitsuba: paths/s {pps_c / (paths / tm):.3f} (wall), {cm / cc:.3f} (CPU); "

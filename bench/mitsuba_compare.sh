@@ -19,7 +19,8 @@
 # Not run by the test suite. Usage:
 #   bench/mitsuba_compare.sh [MITSUBA_SPP]        (default 32)
 # Environment: CARGO_TARGET_DIR, BENCH_DIR, MITSUBA_VENV, CAMSIM,
-#   REF_SPP (1024), CONV_SPP (256 per half; 0 skips the agreement check).
+#   REF_SPP (1024), CONV_SPP (256 per half; 0 skips the agreement check),
+#   SEEDS (4 timed renders per measurement).
 set -euo pipefail
 SPP="${1:-32}"
 HERE="$(cd "$(dirname "$0")/.." && pwd)"
@@ -46,4 +47,4 @@ fi
 
 exec "$VENV/bin/python" "$HERE/bench/mitsuba_compare.py" \
     --camsim "$CAMSIM" --cache "$BENCH_DIR" --spp "$SPP" \
-    --ref-spp "${REF_SPP:-1024}" --camsim-conv-spp "${CONV_SPP:-256}" --threads 2
+    --ref-spp "${REF_SPP:-1024}" --camsim-conv-spp "${CONV_SPP:-256}" --seeds "${SEEDS:-4}" --threads 2

@@ -51,21 +51,25 @@
 //! - Converged images agree: camsim 512 spp vs Mitsuba 1024 spp, mean Y
 //!   ratio 0.9999; 16×16-pixel block means differ by 0.47 % RMS (max 1.6 %),
 //!   which is their Monte Carlo noise; no systematic per-pixel difference.
-//! - Throughput at 32 spp: Mitsuba 3.9.1 `llvm_ad_spectral` 0.22 M paths/s
-//!   wall (0.44 M per CPU-s), camsim 0.21 M (0.42 M per CPU-s): ratio 0.94.
-//!   Mitsuba must be timed to kernel completion (`dr.sync_thread()`): timing
-//!   `mi.render()` + `dr.eval()` alone times the asynchronous launch and
-//!   reports tens of M paths/s; the 3.4 M paths/s is not reproducible
-//!   with a synchronised timer on this machine.
-//! - Relative RMSE of Y, all pixels: equal spp (32) Mitsuba 18.8 %, camsim
-//!   20.7 % (×1.10); equal time camsim/Mitsuba 1.14. ~85 % of that MSE is
-//!   pixel-coverage noise on the emitter's edge (identical for both). Without
-//!   the emitter ±2 px: 16.2 % vs 17.6 % (×1.09), equal time ×1.11.
+//! - Throughput at 32 spp (mean of 4 seeds): Mitsuba 3.9.1 `llvm_ad_spectral`
+//!   0.22 M paths/s wall (0.45 M per CPU-s), camsim 0.21 M (0.42 M per
+//!   CPU-s): ratio 0.93. Mitsuba must be timed to kernel completion
+//!   (`dr.sync_thread()`): timing `mi.render()` + `dr.eval()` alone times the
+//!   asynchronous launch and reports tens of M paths/s; the 3.4 M
+//!   paths/s is not reproducible with a synchronised timer on this machine.
+//! - Relative RMSE of Y, all pixels (4 seeds): equal spp (32) Mitsuba
+//!   20.3 %, camsim 21.1 % (×1.04 ± 0.05); equal time ×1.09 ± 0.05 (wall),
+//!   ×1.08 (CPU). ~85 % of that MSE is pixel-coverage noise on the emitter's
+//!   edge (identical for both, heavy-tailed: one image's RMSE scatters ±5 %).
+//!   Without the emitter ±2 px: 16.2 % vs 17.6 % (×1.085 ± 0.002), equal
+//!   time ×1.13.
 //! - camsim's extra per-sample noise is its Russian roulette (from the 2nd
 //!   bounce, survival = max-band throughput, as pbrt-v4), not NEE/MIS: with
 //!   Mitsuba's policy (from depth 5, survival min(max β, 0.95)) camsim's
 //!   transport RMSE at 32 spp is 16.19 % = Mitsuba's 16.2 %, at 23 % more CPU
-//!   time (so equal-time efficiency is about unchanged). The excess sits on
+//!   time; efficiency 1/(RMSE²·t) for RR from depth 2/3/4/5: 5.21, 5.21,
+//!   5.04, 5.01 (transport), 3.76, 3.52, 3.24, 3.15 (all pixels), so the
+//!   current early roulette is the better equal-time choice. The excess sits on
 //!   the green wall (block RMSE 19 % vs 14 %), where β after the green bounce
 //!   is ≤ 0.5 and early roulette kills most indirect paths.
 
