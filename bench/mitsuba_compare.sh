@@ -11,7 +11,7 @@
 # src/render/bench.rs (scene, spectra, compared quantity).
 #
 # Set-up (once, done by this script except the Debian package):
-#   apt-get install libllvm19            # Mitsuba's LLVM variants need it
+#   apt-get install libllvm19 python3-venv   # Mitsuba's LLVM variants need libllvm19
 #   python3 -m venv target/mitsuba-bench/venv && pip install mitsuba numpy
 # The Mitsuba reference (1024 spp) and camsim's converged image are rendered
 # once and cached under $BENCH_DIR (camsim's keyed by the binary's hash).
