@@ -1,70 +1,50 @@
 #!/usr/bin/env bash
 # Compare camsim's spectral path tracer with Mitsuba 3 on Mitsuba's own
-# cornell_box() scene: 256×256, max_depth 7 (camsim max_bounces 6), 2 threads.
+# cornell_box() scene in one run: 256×256, Mitsuba max_depth 7 (= camsim
+# max_bounces 6), 2 threads, box pixel filter, Mitsuba `llvm_ad_spectral`.
 #
-# Installs Mitsuba from PyPI into a private virtualenv (its LLVM variants need
-# Debian's libllvm19: `apt-get install libllvm19`), renders the scene with
-# `llvm_ad_spectral` (falls back to `scalar_spectral`), then runs
-# `camsim bench render` and prints paths/s of both and their ratio.
+# Prints for both renderers: paths/s, the relative RMSE of CIE Y luminance at
+# equal spp and at equal time against ONE converged Mitsuba reference, how
+# well camsim's converged image agrees with Mitsuba's, and a final line
+#   RATIO camsim/Mitsuba: paths/s … ; equal-time RMSE …
+# The method is documented in bench/mitsuba_compare.py and in
+# src/render/bench.rs (scene, spectra, compared quantity).
 #
-# Not run by the test suite. Usage: bench/mitsuba_compare.sh [SPP]
+# Set-up (once, done by this script except the Debian package):
+#   apt-get install libllvm19 python3-venv   # Mitsuba's LLVM variants need libllvm19
+#   python3 -m venv target/mitsuba-bench/venv && pip install mitsuba numpy
+# The Mitsuba reference (1024 spp) and camsim's converged image are rendered
+# once and cached under $BENCH_DIR (camsim's keyed by the binary's hash).
+#
+# Not run by the test suite. Usage:
+#   bench/mitsuba_compare.sh [MITSUBA_SPP]        (default 32)
+# Environment: CARGO_TARGET_DIR, BENCH_DIR, MITSUBA_VENV, CAMSIM,
+#   REF_SPP (1024), CONV_SPP (256 per half; 0 skips the agreement check),
+#   SEEDS (4 timed renders per measurement).
 set -euo pipefail
-SPP="${1:-64}"
+SPP="${1:-32}"
 HERE="$(cd "$(dirname "$0")/.." && pwd)"
-VENV="${MITSUBA_VENV:-$HERE/target/mitsuba-venv}"
-CAMSIM="${CAMSIM:-$HERE/target/release/camsim}"
+TARGET="${CARGO_TARGET_DIR:-$HERE/target}"
+BENCH_DIR="${BENCH_DIR:-$TARGET/mitsuba-bench}"
+VENV="${MITSUBA_VENV:-$BENCH_DIR/venv}"
+CAMSIM="${CAMSIM:-$TARGET/release/camsim}"
 
-if ! ldconfig -p | grep -q libLLVM; then
-    echo "note: libLLVM not found; install Debian's libllvm19 for the llvm_* variants (sudo apt-get install libllvm19)" >&2
+if ! ldconfig -p | grep -q 'libLLVM.so.19\|libLLVM-19'; then
+    echo "note: Debian's libllvm19 not found; Mitsuba's llvm_* variants need it: apt-get install libllvm19" >&2
+    echo "      (without it the script falls back to the much slower scalar_spectral variant)" >&2
 fi
+mkdir -p "$BENCH_DIR"
 if [ ! -x "$VENV/bin/python" ]; then
     python3 -m venv "$VENV"
-    "$VENV/bin/pip" install --quiet mitsuba
 fi
-[ -x "$CAMSIM" ] || (cd "$HERE" && cargo build --release)
+if ! "$VENV/bin/python" -c "import mitsuba, numpy" 2>/dev/null; then
+    "$VENV/bin/pip" install --quiet mitsuba numpy
+fi
+if [ -z "${CAMSIM_NO_BUILD:-}" ]; then
+    (cd "$HERE" && CARGO_TARGET_DIR="$TARGET" cargo build --release --quiet)
+fi
+[ -x "$CAMSIM" ] || { echo "camsim binary not found at $CAMSIM" >&2; exit 1; }
 
-MITSUBA_OUT="$("$VENV/bin/python" - "$SPP" <<'PY'
-import sys, time
-import mitsuba as mi
-spp = int(sys.argv[1])
-variant = None
-for v in ("llvm_ad_spectral", "scalar_spectral"):
-    try:
-        mi.set_variant(v)
-        variant = v
-        break
-    except Exception:
-        pass
-if variant is None:
-    sys.exit("no spectral Mitsuba variant available")
-try:
-    import drjit as dr
-    dr.set_thread_count(2)
-except Exception:
-    pass
-scene_dict = mi.cornell_box()
-scene_dict.setdefault("integrator", {"type": "path"})["max_depth"] = 7
-scene_dict["sensor"]["film"]["width"] = 256
-scene_dict["sensor"]["film"]["height"] = 256
-scene = mi.load_dict(scene_dict)
-mi.render(scene, spp=1)  # JIT warm-up, not timed
-t0 = time.perf_counter()
-c0 = time.process_time()
-img = mi.render(scene, spp=spp)
-if hasattr(dr, "eval"):
-    dr.eval(img)
-t = time.perf_counter() - t0
-c = time.process_time() - c0
-paths = 256 * 256 * spp
-print(f"{variant} {spp} {t:.4f} {paths / t:.1f} {c:.4f} {paths / c:.1f}")
-PY
-)"
-read -r VARIANT MSPP MTIME MPPS MCPU MPPC <<<"$MITSUBA_OUT"
-echo "Mitsuba 3 ($VARIANT): $MSPP spp in $MTIME s = $(awk -v p="$MPPS" 'BEGIN{printf "%.3f", p/1e6}') M paths/s wall; $MCPU CPU s = $(awk -v p="$MPPC" 'BEGIN{printf "%.3f", p/1e6}') M paths per CPU-second (4 wavelengths per path)"
-
-CAMSIM_OUT="$("$CAMSIM" bench render --spp "$SPP" --ref-spp "$SPP" --threads 2)"
-echo "$CAMSIM_OUT"
-CPPS="$(echo "$CAMSIM_OUT" | awk '/Bvh2:/ { for (i = 1; i <= NF; i++) if ($i == "M" && $(i+1) == "paths/s") { print $(i-1) * 1e6; exit } }')"
-CPPC="$(echo "$CAMSIM_OUT" | awk '/Bvh2:/ { for (i = 1; i <= NF; i++) if ($i == "paths" && $(i+1) == "per" && $(i+2) == "CPU-second") { print $(i-2) * 1e6; exit } }')"
-awk -v c="$CPPS" -v m="$MPPS" 'BEGIN { printf "camsim / Mitsuba paths/s ratio (wall): %.3f (camsim carries 31 bands per path, Mitsuba 4)\n", c / m }'
-awk -v c="$CPPC" -v m="$MPPC" 'BEGIN { printf "camsim / Mitsuba paths per CPU-second ratio: %.3f (robust to a loaded machine)\n", c / m }'
+exec "$VENV/bin/python" "$HERE/bench/mitsuba_compare.py" \
+    --camsim "$CAMSIM" --cache "$BENCH_DIR" --spp "$SPP" \
+    --ref-spp "${REF_SPP:-1024}" --camsim-conv-spp "${CONV_SPP:-256}" --seeds "${SEEDS:-4}" --threads 2

@@ -42,6 +42,21 @@ pub struct BenchArgs {
     /// Wavelength bands carried per path (400–700 nm).
     #[arg(long, default_value_t = 31)]
     pub bands: usize,
+    /// render: seed of the timed render.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// render: BVH(s) to time: bvh4 (the renderer's), bvh2, cwbvh, both or all (the first one's image is measured).
+    #[arg(long, default_value = "all")]
+    pub bvh: String,
+    /// render: reference CIE Y image (grey PFM) instead of camsim's own --ref-spp render.
+    #[arg(long)]
+    pub reference: Option<PathBuf>,
+    /// render: per-pixel variance of the reference's mean (grey PFM).
+    #[arg(long)]
+    pub reference_var: Option<PathBuf>,
+    /// render: write the timed render's CIE Y image (grey PFM).
+    #[arg(long)]
+    pub y_out: Option<PathBuf>,
 }
 
 fn parse_roi(s: &str) -> Result<Rect> {
@@ -142,7 +157,30 @@ pub fn render(a: RenderArgs) -> Result<i32> {
 pub fn bench(a: BenchArgs) -> Result<i32> {
     match a.which.as_str() {
         "render" => {
-            let r = camsim::render::bench::run(a.spp, a.ref_spp, a.threads, a.bands)?;
+            use camsim::render::BvhKind;
+            let bvh = match a.bvh.as_str() {
+                "bvh4" => vec![BvhKind::Bvh4],
+                "bvh2" => vec![BvhKind::Bvh2],
+                "all" => vec![BvhKind::Bvh4, BvhKind::Bvh2, BvhKind::Cwbvh],
+                "cwbvh" => vec![BvhKind::Cwbvh],
+                "both" => vec![BvhKind::Bvh2, BvhKind::Cwbvh],
+                other => {
+                    return Err(Error::invalid(format!(
+                        "--bvh '{other}': expected bvh4 (the renderer's), bvh2, cwbvh, both (bvh2 and cwbvh) or all"
+                    )));
+                }
+            };
+            let r = camsim::render::bench::run(&camsim::render::bench::BenchOptions {
+                spp: a.spp,
+                ref_spp: a.ref_spp,
+                threads: a.threads,
+                bands: a.bands,
+                seed: a.seed,
+                bvh,
+                reference: a.reference,
+                reference_var: a.reference_var,
+                y_out: a.y_out,
+            })?;
             println!("{r}");
             Ok(0)
         }

@@ -1,0 +1,96 @@
+//! `camsim bench render` as a user runs it, without Mitsuba.
+
+use std::process::Command;
+
+fn camsim() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_camsim"))
+}
+
+fn read_pfm_mean(p: &std::path::Path) -> f64 {
+    let (w, h, d) = camsim::render::bench::read_pfm(p).unwrap();
+    assert_eq!((w, h), (256, 256));
+    d.iter().map(|&x| x as f64).sum::<f64>() / d.len() as f64
+}
+
+#[test]
+fn bench_scene_mean_luminance_matches_mitsuba() {
+    // Mitsuba 3.9.1 llvm_ad_spectral, cornell_box() at 256², max_depth 7, box
+    // filter, 1024 spp (bench/mitsuba_compare.sh): mean CIE Y = 0.15380, its
+    // own noise < 0.05 %. camsim at 1 spp: per-pixel relative noise ≈ 110 %,
+    // so the image mean has σ ≈ 110 %/√65536 ≈ 0.45 %; 2 % is > 4σ and still
+    // catches a wrong spectrum, emitter scale, camera or bounce count.
+    let dir = tempfile::tempdir().unwrap();
+    let y = dir.path().join("y.pfm");
+    let out = camsim()
+        .args([
+            "bench",
+            "render",
+            "--spp",
+            "1",
+            "--ref-spp",
+            "0",
+            "--bvh",
+            "bvh4",
+        ])
+        .args(["--threads", "2", "--y-out"])
+        .arg(&y)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("camsim-bench spp=1 "), "{stdout}");
+    let m = read_pfm_mean(&y);
+    assert!((m / 0.15380 - 1.0).abs() < 0.02, "mean Y {m}");
+
+    // The same image as a reference: RMSE 0, reported on the machine line.
+    let out = camsim()
+        .args([
+            "bench",
+            "render",
+            "--spp",
+            "1",
+            "--bvh",
+            "bvh4",
+            "--reference",
+        ])
+        .arg(&y)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}");
+    assert!(stdout.contains(" rmse_y=0.000000e0 "), "{stdout}");
+}
+
+#[test]
+fn bench_render_rejects_bad_options_with_named_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let small = dir.path().join("small.pfm");
+    camsim::render::bench::write_pfm(&small, 2, 1, &[0.0, 1.0]).unwrap();
+    let out = camsim()
+        .args([
+            "bench",
+            "render",
+            "--spp",
+            "1",
+            "--bvh",
+            "bvh4",
+            "--reference",
+        ])
+        .arg(&small)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("small.pfm") && err.contains("2×1"), "{err}");
+
+    let out = camsim()
+        .args(["bench", "render", "--spp", "1", "--bvh", "octree"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--bvh 'octree'"));
+}
