@@ -46,10 +46,17 @@ pub struct FitRtfArgs {
     pub wavelengths: Vec<f64>,
     #[arg(long)]
     pub out: PathBuf,
-    /// Pass/no-pass representation: `ellipses` (minimum-area enclosing
-    /// ellipse per field radius, as the paper's files) or `area-ellipses`
-    /// (radial extent and area of the pass region; exact flux when vignetted).
-    #[arg(long, default_value = "ellipses")]
+    /// Pass/no-pass representation: `area-ellipses` (default: per field
+    /// radius the ellipse with the pass region's radial extent and area; RI
+    /// within 0.005 of the prescription), `ellipses` (minimum-area enclosing
+    /// ellipse, as the paper's files; up to +0.075 RI at vignetted fields)
+    /// or `circles` (intersection of vignetting circles of fixed radius and
+    /// linear centre; up to +0.027, pupil aberration bends them).
+    #[arg(
+        long = "pass",
+        visible_alias = "pass-method",
+        default_value = "area-ellipses"
+    )]
     pub pass_method: String,
 }
 
@@ -144,9 +151,10 @@ pub fn run(c: LensCmd) -> Result<i32> {
                     camsim::optics::fit::PassMethod::Ellipses
                 }
                 "area-ellipses" => camsim::optics::fit::PassMethod::AreaEllipses,
+                "circles" => camsim::optics::fit::PassMethod::Circles,
                 other => {
                     return Err(Error::Invalid(format!(
-                        "--pass-method: expected 'ellipses' or 'area-ellipses', got '{other}'"
+                        "--pass: expected 'circles', 'ellipses' or 'area-ellipses', got '{other}'"
                     )));
                 }
             };
