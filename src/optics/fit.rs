@@ -1059,4 +1059,38 @@ mod tests {
         );
         assert!(a[0][1].abs() < 1e-4);
     }
+
+    /// Vignetting circles: boundary points of an intersection of two known
+    /// circles (radius R, centre (0, s·r)) over several input radii give
+    /// those circles back.
+    #[test]
+    fn vignetting_circles_recover_known_circles() {
+        let truth = [(0usize, 2.0, 0.0), (3usize, 2.5, 0.3)];
+        let mut pts = Vec::new();
+        for k in 0..6 {
+            let r = 1.5 * k as f64;
+            for a in 0..64 {
+                let th = std::f64::consts::TAU * (a as f64 + 0.5) / 64.0;
+                for &(surf, rad, s) in &truth {
+                    let p = DVec2::new(rad * th.cos(), s * r + rad * th.sin());
+                    // Keep the part of each circle inside the other one.
+                    let inside = truth.iter().all(|&(_, r2, s2)| {
+                        p.x * p.x + (p.y - s2 * r).powi(2) <= r2 * r2 * (1.0 + 1e-12)
+                    });
+                    if inside {
+                        pts.push((r, p, surf));
+                    }
+                }
+            }
+        }
+        let Some(PassNoPass::Circles(c)) = vignetting_circles(&pts, 10.0, 7.5) else {
+            panic!("no circles");
+        };
+        assert_eq!(c.radii_mm.len(), 2);
+        for (k, &(_, rad, s)) in truth.iter().enumerate() {
+            assert!((c.radii_mm[k] - rad).abs() < 1e-9, "{:?}", c);
+            assert!((c.sensitivities[k] - s).abs() < 1e-9, "{:?}", c);
+        }
+        assert_eq!(c.max_input_radius_mm, Some(7.5));
+    }
 }
