@@ -45,7 +45,10 @@
 //! Variants tried and not kept (no better at degrees 3–6): a floor of 2 %
 //! of the largest σ, σ clamped below at the on-axis σ or at half the median
 //! σ, weights 1/σ instead of 1/σ², other input-plane positions (0.9 and
-//! 0.999 × the back focal distance: 2–3× worse). `Weighting::Uniform` gives
+//! 0.999 × the back focal distance: 2–3× worse); 16 instead of 8 radial
+//! pupil samples changes nothing (±0.1 %), so the pupil is sampled densely
+//! enough. Off axis the weights help as much (Tessar degree 3, ESF at 10 and
+//! 25 mm field: 8.3/10 % unweighted → 1.2/1.6 %). `Weighting::Uniform` gives
 //! the unweighted fit.
 //!
 //! Pass/no-pass: the pass plane is the paraxial exit pupil (its distance
