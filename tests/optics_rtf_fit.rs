@@ -5,6 +5,12 @@
 //! values), and both against the Zemax references. The per-degree table is
 //! written to `target/optics-report.csv` and printed (`--nocapture`).
 //!
+//! Models per lens: `rtf-degreeN` is the default fit (aberration-relative
+//! least-squares weights, area-matched pass ellipses), `-unweighted` the
+//! unweighted least squares of session 1 on the same traced data, and at
+//! degree 5 the other pass/no-pass representations (the paper's enclosing
+//! ellipses; vignetting circles). ESF positions: every Zemax position.
+//!
 //! Set-up: RI at infinity focus (paraxial back focal distance), 0–95 % of the
 //! largest film radius that receives light. ESF on axis, object at the first
 //! Zemax distance (dgauss 1 m, Tessar 1.3 m from the front vertex), film at
@@ -14,7 +20,7 @@
 
 use camsim::optics::Camera;
 use camsim::optics::analysis::{edge_spread, relative_illumination};
-use camsim::optics::fit::{FitOptions, PassMethod, fit_rtf, fit_rtf_degrees};
+use camsim::optics::fit::{FitOptions, PassMethod, Weighting, fit_rtf, fit_rtf_degrees};
 use camsim::optics::prescription::{Prescription, PrescriptionCamera};
 use camsim::optics::rtf::{Rtf, RtfCamera};
 use std::fmt::Write as _;
@@ -94,8 +100,8 @@ fn evaluate(case: &Case, rows: &mut Vec<Row>) {
     let r_hi = 0.95 * presc_inf.max_film_radius_mm;
     let heights: Vec<f64> = (0..=12).map(|k| r_hi * k as f64 / 12.0).collect();
     let zemax_ri = read_pairs(case.ri_ref);
-    // Every second Zemax position (the ESF is smooth on that scale).
-    let zemax_esf: Vec<(f64, f64)> = read_esf(case.esf_ref).into_iter().step_by(2).collect();
+    // Every Zemax position (Tessar 10 µm, double Gauss 2 µm apart).
+    let zemax_esf: Vec<(f64, f64)> = read_esf(case.esf_ref);
     let pos: Vec<f64> = zemax_esf.iter().map(|p| p.0).collect();
     let z_obj = film_esf + track + case.object_mm;
     let ri_of = |cam: &dyn Camera| relative_illumination(cam, &heights, 550.0, 96).unwrap();
@@ -144,10 +150,8 @@ fn evaluate(case: &Case, rows: &mut Vec<Row>) {
             cond,
         });
     };
-    let opts = FitOptions {
-        pass_method: PassMethod::AreaEllipses,
-        ..Default::default()
-    };
+    // Default fit: aberration-relative weights, area-matched ellipses.
+    let opts = FitOptions::default();
     let mut degree6 = None;
     for (d, (rtf, rep)) in DEGREES
         .iter()
@@ -156,14 +160,25 @@ fn evaluate(case: &Case, rows: &mut Vec<Row>) {
         // The JSON round trip is what renders: write and read back.
         let back = Rtf::from_value(&rtf.to_json(), Path::new("fit.json")).unwrap();
         assert_eq!(back, rtf);
-        push_rtf(
-            format!("rtf-degree{d}-area-ellipses"),
-            &back,
-            rep[0].condition_number,
-        );
+        push_rtf(format!("rtf-degree{d}"), &back, rep[0].condition_number);
         if *d == 6 {
             degree6 = Some(back);
         }
+    }
+    // Before (session 1): unweighted least squares, same data.
+    let opts = FitOptions {
+        weighting: Weighting::Uniform,
+        ..Default::default()
+    };
+    for (d, (rtf, rep)) in DEGREES
+        .iter()
+        .zip(fit_rtf_degrees(&lens, &[550.0], &DEGREES, &opts).unwrap())
+    {
+        push_rtf(
+            format!("rtf-degree{d}-unweighted"),
+            &rtf,
+            rep[0].condition_number,
+        );
     }
     // Output-plane z convention (rtf.rs): moving the output plane by
     // planeoffsetinput (the "measured from the rear vertex" reading) must
@@ -184,18 +199,20 @@ fn evaluate(case: &Case, rows: &mut Vec<Row>) {
             "a displaced output plane should change the ESF (RMSE {err})"
         );
     }
-    // The paper's pass/no-pass (minimum-area enclosing ellipses), degree 5.
-    let opts = FitOptions {
-        degree: 5,
-        pass_method: PassMethod::Ellipses,
-        ..Default::default()
-    };
-    let (rtf, rep) = fit_rtf(&lens, &[550.0], &opts).unwrap();
-    push_rtf(
-        "rtf-degree5-enclosing-ellipses".into(),
-        &rtf,
-        rep[0].condition_number,
-    );
+    // The other pass/no-pass representations, degree 5 (same polynomials):
+    // the paper's minimum-area enclosing ellipses, and area-matched ellipses.
+    for (name, pass_method) in [
+        ("enclosing-ellipses", PassMethod::Ellipses),
+        ("circles", PassMethod::Circles),
+    ] {
+        let opts = FitOptions {
+            degree: 5,
+            pass_method,
+            ..Default::default()
+        };
+        let (rtf, rep) = fit_rtf(&lens, &[550.0], &opts).unwrap();
+        push_rtf(format!("rtf-degree5-{name}"), &rtf, rep[0].condition_number);
+    }
 }
 
 #[test]
@@ -241,10 +258,23 @@ fn optics_fitted_rtfs_match_prescriptions_and_zemax() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("target");
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::write(dir.join("optics-report.csv"), &csv).unwrap();
-    // RI within 0.01 at every degree 3–7. The in-focus ESF needs the
-    // polynomial to carry the on-axis aberrations: degrees 3–5 do not reach
-    // 1 % for the Tessar (see the table), degrees 6 and 7 do for both lenses.
-    for r in rows.iter().filter(|r| r.model.contains("area-ellipses")) {
+    // Acceptance, default fit (aberration-relative weights, area-matched
+    // ellipses): RI within 0.01 at every degree 3–7.
+    // ESF ≤ 1 %: double Gauss from degree 5, Tessar from degree 6. Below
+    // that the polynomial cannot carry the aberrations over the whole field
+    // (table: the unweighted fit gives 2.5 % / 10 % at degree 3; weighting
+    // by each field's own aberration brings that to 1.7 % / 0.9 %, but the
+    // Tessar's 0.9 % at degree 3 is not robust — 2.1 % with 48 instead of
+    // 24 field radii — and degrees 4–5 stay at 1.2–1.7 %). Those degrees
+    // are held to 2.5 % so a regression shows.
+    let esf_limit = |lens: &str, d: usize| match (lens, d) {
+        ("dgauss28deg", 5..) | ("tessar", 6..) => 0.01,
+        _ => 0.025,
+    };
+    for (r, d) in rows.iter().filter_map(|r| {
+        let d = r.model.strip_prefix("rtf-degree")?;
+        d.parse::<usize>().ok().map(|d| (r, d))
+    }) {
         assert!(
             r.ri_err_vs_prescription <= 0.01,
             "{} {}: RI error {}",
@@ -252,15 +282,21 @@ fn optics_fitted_rtfs_match_prescriptions_and_zemax() {
             r.model,
             r.ri_err_vs_prescription
         );
-        if r.model.contains("degree6") || r.model.contains("degree7") {
-            assert!(
-                r.esf_rmse_vs_prescription <= 0.01,
-                "{} {}: ESF RMSE {}",
-                r.lens,
-                r.model,
-                r.esf_rmse_vs_prescription
-            );
-        }
+        assert!(
+            r.esf_rmse_vs_prescription <= esf_limit(r.lens, d),
+            "{} {}: ESF RMSE {}",
+            r.lens,
+            r.model,
+            r.esf_rmse_vs_prescription
+        );
+    }
+    // The paper's enclosing ellipses let light through at vignetted fields
+    // (RI +0.03…+0.08), which is why they are not the default.
+    for r in rows
+        .iter()
+        .filter(|r| r.model.ends_with("enclosing-ellipses"))
+    {
+        assert!(r.ri_err_vs_prescription > 0.02, "{} {}", r.lens, r.model);
     }
     // The prescription itself reproduces Zemax's geometric ESF (≤ 1.5 %).
     for r in rows.iter().filter(|r| r.model == "prescription") {
@@ -285,6 +321,7 @@ fn optics_degree16_fit_is_finite() {
         n_theta: 16,
         n_ellipses: 11,
         pass_method: PassMethod::AreaEllipses,
+        ..Default::default()
     };
     let (rtf, reports) = fit_rtf(&lens, &[550.0], &opts).unwrap();
     for r in &reports {

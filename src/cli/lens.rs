@@ -4,7 +4,10 @@ use std::path::PathBuf;
 
 #[derive(Subcommand)]
 pub enum LensCmd {
-    /// Focal length, f-number, exit pupil, film distance for focus at infinity.
+    /// Focal length, f-number, exit pupil, film distance for focus at infinity,
+    /// and the on-axis beam vergence (1/m) at `--film-distance-mm` (default:
+    /// the infinity film distance): 1/vergence is the focus distance from the
+    /// film; a negative vergence means focus beyond infinity.
     Info(LensInfoArgs),
     /// Relative illumination vs field height: CSV field_height_mm,relative_illumination.
     Ri(LensRiArgs),
@@ -17,6 +20,9 @@ pub enum LensCmd {
 #[derive(Args)]
 pub struct LensInfoArgs {
     pub lens: PathBuf,
+    /// Film distance for the last two columns (default: infinity focus).
+    #[arg(long)]
+    pub film_distance_mm: Option<f64>,
 }
 #[derive(Args)]
 pub struct LensRiArgs {
@@ -46,10 +52,17 @@ pub struct FitRtfArgs {
     pub wavelengths: Vec<f64>,
     #[arg(long)]
     pub out: PathBuf,
-    /// Pass/no-pass representation: `ellipses` (minimum-area enclosing
-    /// ellipse per field radius, as the paper's files) or `area-ellipses`
-    /// (radial extent and area of the pass region; exact flux when vignetted).
-    #[arg(long, default_value = "ellipses")]
+    /// Pass/no-pass representation: `area-ellipses` (default: per field
+    /// radius the ellipse with the pass region's radial extent and area; RI
+    /// within 0.005 of the prescription), `ellipses` (minimum-area enclosing
+    /// ellipse, as the paper's files; up to +0.075 RI at vignetted fields)
+    /// or `circles` (intersection of vignetting circles of fixed radius and
+    /// linear centre; up to +0.027, pupil aberration bends them).
+    #[arg(
+        long = "pass",
+        visible_alias = "pass-method",
+        default_value = "area-ellipses"
+    )]
     pub pass_method: String,
 }
 
@@ -60,15 +73,21 @@ pub fn run(c: LensCmd) -> Result<i32> {
         LensCmd::Info(a) => {
             let lens = analysis::load_lens(&a.lens)?;
             let i = analysis::lens_info(&lens, DEFAULT_WAVELENGTH_NM)?;
-            out.push_str("focal_length_mm,f_number,working_f_number,exit_pupil_from_film_mm,exit_pupil_radius_mm,film_distance_infinity_mm\n");
+            // Where a given film distance focuses (RTF files carry no focus).
+            let cam = analysis::lens_camera(lens, a.film_distance_mm, None, DEFAULT_WAVELENGTH_NM)?;
+            let v = analysis::on_axis_vergence_per_m(cam.camera(), DEFAULT_WAVELENGTH_NM, 128)
+                .ok_or_else(|| Error::Invalid("no light reaches the film on axis".into()))?;
+            out.push_str("focal_length_mm,f_number,working_f_number,exit_pupil_from_film_mm,exit_pupil_radius_mm,film_distance_infinity_mm,film_distance_mm,beam_vergence_per_m\n");
             out.push_str(&format!(
-                "{},{},{},{},{},{}\n",
+                "{},{},{},{},{},{},{},{}\n",
                 i.focal_length_mm,
                 i.f_number,
                 i.working_f_number,
                 i.exit_pupil_from_film_mm,
                 i.exit_pupil_radius_mm,
-                i.film_distance_infinity_mm
+                i.film_distance_infinity_mm,
+                cam.film_distance_mm(),
+                v
             ));
         }
         LensCmd::Ri(a) => {
@@ -144,9 +163,10 @@ pub fn run(c: LensCmd) -> Result<i32> {
                     camsim::optics::fit::PassMethod::Ellipses
                 }
                 "area-ellipses" => camsim::optics::fit::PassMethod::AreaEllipses,
+                "circles" => camsim::optics::fit::PassMethod::Circles,
                 other => {
                     return Err(Error::Invalid(format!(
-                        "--pass-method: expected 'ellipses' or 'area-ellipses', got '{other}'"
+                        "--pass: expected 'circles', 'ellipses' or 'area-ellipses', got '{other}'"
                     )));
                 }
             };

@@ -8,6 +8,35 @@
 //! camera space has the film at the origin for prescriptions and RTFs.
 //! Quadrature: an n×n midpoint grid over the pupil sample square
 //! (deterministic, identical for every thread count).
+//!
+//! Relative illumination definition: E(h)/E(0) with E = L·(projected solid
+//! angle of the rays that pass), the radiometry of a Lambertian scene of
+//! uniform radiance L (object at infinity, no transmission losses) — the
+//! quantity Zemax's "Relative Illumination" integrates over the exit pupil
+//! in direction-cosine space; field height = real image height on the film.
+//! Against the Zemax tables in `lenses/zemax-reference` our prescription
+//! traces are lower at the outer field (max 0.033 double Gauss, 0.065
+//! Tessar). Investigated (numbers at 550 nm; the JSON indices are
+//! wavelength-independent, so the wavelength is not it):
+//! - Double Gauss, unvignetted field (≤ 17.5 mm): our RI equals a trace
+//!   with every aperture but the stop removed (0.9466 vs 0.9464 at 17.5 mm),
+//!   so no clipping error; Zemax is higher by a smooth factor
+//!   ≈ 1 + 0.35·(h/f)² (1.0008, 1.0027, 1.0058, 1.011 at 4.4, 8.8, 13.1,
+//!   17.5 mm). A field-height convention (paraxial vs real image height)
+//!   would need 11 % distortion at 10° to explain that; the double Gauss
+//!   has < 1 %.
+//! - Both curves share the vignetting knee (24–26 mm) and the end of the
+//!   field (43.8 mm ours, 45 mm the last Zemax row at 0), so the apertures
+//!   and the image-side geometry agree.
+//! - Tessar: the gap opens near the axis (−0.006 at 4.6 mm) and stays
+//!   −0.05…−0.065 from 40 mm on, while a stop-only trace is far above both
+//!   (0.618 vs 0.341 Zemax at 64 mm): Zemax vignettes less than the JSON's
+//!   rounded semi-apertures (10.5/8.5 mm) do, which is what different
+//!   (Zemax "automatic") semi-diameters would give.
+//!
+//! We found no convention of ours to change; the Zemax files do not record
+//! their semi-diameters or field settings, so the remaining gap is
+//! documented, not fitted. The RTF acceptance is prescription vs RTF.
 
 // `!(x > 0.0)` is used on purpose: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -344,6 +373,31 @@ pub fn blur_half_width_um(
         }
         _ => 10.0,
     }
+}
+
+/// Best-fit vergence (1/m) of the beam a camera sends out from the on-axis
+/// film point: each ray, extended back, meets the film plane at lateral
+/// offset a (metres) with lateral slope b = d_xy/d_z; the beam that best
+/// matches b = −v·a (weighted least squares over an n×n pupil grid)
+/// converges at distance 1/v in front of the film. v > 0: focused at a
+/// real object distance 1/v; v = 0: infinity; v < 0: "beyond infinity"
+/// (the rays diverge; no real object is in focus). None if no ray passes.
+pub fn on_axis_vergence_per_m(cam: &dyn Camera, wavelength_nm: f64, n: usize) -> Option<f64> {
+    let (mut sab, mut saa) = (0.0, 0.0);
+    for i in 0..n {
+        for j in 0..n {
+            let u = DVec2::new((i as f64 + 0.5) / n as f64, (j as f64 + 0.5) / n as f64);
+            if let Some(r) = cam.sample_ray(DVec2::ZERO, u, wavelength_nm)
+                && r.direction.z > 0.0
+            {
+                let b = DVec2::new(r.direction.x, r.direction.y) / r.direction.z;
+                let a = DVec2::new(r.origin.x, r.origin.y) - b * r.origin.z;
+                sab += r.weight * a.dot(b);
+                saa += r.weight * a.dot(a);
+            }
+        }
+    }
+    (saa > 0.0).then(|| -sab / saa)
 }
 
 /// First-order summary of a lens for `camsim lens info` (mm).

@@ -10,9 +10,11 @@
 //!
 //! Data: input points (0, r) on the input plane for field radii r from 0 to
 //! the last radius where light passes; for each, directions aimed at a polar
-//! grid (area-uniform in ρ, uniform in angle) filling the pass region on the
-//! pass plane; every ray is traced through the prescription and, when it
-//! reaches the scene, propagated to the output plane.
+//! grid (area-uniform in ρ, uniform in angle) filling that radius's
+//! area-matched pass ellipse on the pass plane (the same data whatever the
+//! pass/no-pass representation); every ray is traced through the
+//! prescription and, when it reaches the scene, propagated to the output
+//! plane.
 //!
 //! Least squares: all monomials r^i·dx^j·dy^k with i+j+k ≤ N, in scaled
 //! variables (r/r_max, dx/s, dy/s with s the largest |dx|,|dy|), columns
@@ -22,31 +24,64 @@
 //! block is estimated by power iteration on R and on R⁻¹; residuals are
 //! re-evaluated from the written (unscaled) coefficients.
 //!
+//! Weights (`Weighting`, decision): by default every ray of field radius r
+//! gets weight 1/σ(r)², σ(r) the RMS residual of that field's output
+//! directions after the best *affine* function of the input direction — a
+//! perfect lens maps the directions from one point affinely, so σ is the
+//! field's geometric aberration, i.e. its blur. An image (or ESF) sees ray
+//! errors relative to the local blur; unweighted least squares spends the
+//! low-degree polynomial on the strongly aberrated, heavily vignetted outer
+//! field and leaves errors several times the blur near the axis, where the
+//! lens is sharpest. Measured (tests/optics_rtf_fit.rs, ESF RMSE against
+//! the prescription on axis): Tessar degree 3/4/5 10.2/4.3/3.4 % → 0.9/1.2/
+//! 1.7 %, double Gauss degree 3/4 2.5/1.3 % → 1.7/1.3 %; degrees 6–7
+//! unchanged within ±0.4 %. The degree-3 Tessar figure is fragile (2.1 %
+//! with 48 field radii instead of 24). What remains at degrees 3–5 is the
+//! polynomial's reach: a degree-N polynomial over a field that runs to 42°
+//! (Tessar) cannot carry the higher-order field aberrations, and the double
+//! Gauss's on-axis spherical aberration has a strong 5th-order part: a
+//! degree-3 fit to the on-axis rays *alone* still leaves 5.4 % ESF RMSE over
+//! the central ±12 µm (weighted global fit 4.9 %, unweighted 6.8 %).
+//! Variants tried and not kept (no better at degrees 3–6): a floor of 2 %
+//! of the largest σ, σ clamped below at the on-axis σ or at half the median
+//! σ, weights 1/σ instead of 1/σ², other input-plane positions (0.9 and
+//! 0.999 × the back focal distance: 2–3× worse); 16 instead of 8 radial
+//! pupil samples changes nothing (±0.1 %), so the pupil is sampled densely
+//! enough. Off axis the weights help as much (Tessar degree 3, ESF at 10 and
+//! 25 mm field: 8.3/10 % unweighted → 1.2/1.6 %). `Weighting::Uniform` gives
+//! the unweighted fit.
+//!
 //! Pass/no-pass: the pass plane is the paraxial exit pupil (its distance
 //! from the input plane; the input-plane offset if that is not > 5 % of f).
 //! The last input radius that passes light is found by a scan in steps of
 //! 2 % of f (a 24×24 grid on the pass plane) refined by bisection. At each of
 //! `n_ellipses` field radii the boundary of the passing region is located by
 //! bisection along 64 directions from the centroid of a 48×48 passing grid
-//! (points mirrored in x, so every ellipse is axis-aligned). Two ellipse
-//! choices (`PassMethod`):
-//! - `Ellipses` (default, as the paper's files): the minimum-area enclosing
-//!   ellipse, Khachiyan's algorithm, scaled to contain every point. Where
-//!   the region is a vignetted "cat's eye" (an intersection of circles) the
-//!   enclosing ellipse lets through rays the lens blocks, so relative
-//!   illumination comes out high at vignetted fields (measured: +0.075 for
-//!   the double Gauss at 29 mm, see tests/optics_rtf_fit.rs).
-//! - `AreaEllipses`: the ellipse with the region's radial extent and area;
-//!   it transmits the right flux (RI within 0.005 of the prescription).
+//! (points mirrored in x, so every ellipse is axis-aligned), and the aperture
+//! that blocks just outside each boundary point is recorded. Three
+//! representations (`PassMethod`; RI error against the prescription, double
+//! Gauss / Tessar, degree 5, tests/optics_rtf_fit.rs):
+//! - `AreaEllipses` (default, decision): the ellipse with the region's
+//!   radial extent and area; it transmits the right flux: 0.005 / 0.004.
+//! - `Ellipses` (the paper's files): the minimum-area enclosing ellipse,
+//!   Khachiyan's algorithm, scaled to contain every point. Where the region
+//!   is a vignetted "cat's eye" the enclosing ellipse lets through rays the
+//!   lens blocks: 0.075 / 0.031, high at vignetted fields.
+//! - `Circles` (Goossens et al.): one circle per blocking aperture, radius R
+//!   and centre (0, s·r) fitted (Gauss–Newton on the geometric distance) to
+//!   the boundary points that aperture blocks. Exact in first-order optics;
+//!   real pupil aberration makes the images of the apertures change size and
+//!   move non-linearly with r, and the constant-R, linear-centre model misses
+//!   that: 0.013 / 0.027 — above the 0.01 acceptance, so not the default.
 //!
-//! Radii beyond the last one that passes light get no ellipse, so the RTF
-//! camera blocks them (no extrapolation).
+//! Radii beyond the last one that passes light get no ellipse (circles: the
+//! file's `maxInputRadius`), so the RTF camera blocks them (no extrapolation).
 
 // `!(x > 0.0)` is used on purpose: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
-use super::prescription::Prescription;
-use super::rtf::{Ellipses, PassNoPass, Poly, Rtf, RtfWave};
+use super::prescription::{Blocked, Prescription};
+use super::rtf::{Circles, Ellipses, PassNoPass, Poly, Rtf, RtfWave};
 use crate::{Error, Result};
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
@@ -63,6 +98,10 @@ pub struct FitOptions {
     /// Field radii with an ellipse (or used to fit the circles).
     pub n_ellipses: usize,
     pub pass_method: PassMethod,
+    pub weighting: Weighting,
+    /// Input plane distance from the rear vertex as a fraction of the
+    /// paraxial back focal distance.
+    pub input_plane_fraction: f64,
 }
 
 /// Pass/no-pass representation written by the fit.
@@ -75,6 +114,12 @@ pub enum PassMethod {
     /// region is a vignetted "cat's eye", which the enclosing ellipse
     /// overestimates).
     AreaEllipses,
+    /// Intersection of vignetting circles (Goossens et al.): each aperture
+    /// that bounds the pass region is seen from input radius r as a circle
+    /// of fixed radius whose centre moves linearly with r. Exact for
+    /// circular apertures in first-order optics; fitted here to the traced
+    /// boundary points each aperture blocks.
+    Circles,
 }
 
 impl Default for FitOptions {
@@ -85,7 +130,9 @@ impl Default for FitOptions {
             n_rho: 8,
             n_theta: 24,
             n_ellipses: 25,
-            pass_method: PassMethod::Ellipses,
+            pass_method: PassMethod::AreaEllipses,
+            weighting: Weighting::AberrationRelative { floor: 0.0 },
+            input_plane_fraction: 0.98,
         }
     }
 }
@@ -371,6 +418,76 @@ pub fn area_matched_ellipse(pts: &[DVec2]) -> Option<(DVec2, [f64; 2])> {
     ))
 }
 
+/// Fit one circle per blocking surface to boundary points (r, p, surface):
+/// x² + (y − s·r)² = R², linear least squares for a start, then Gauss–Newton
+/// on the geometric distance. Surfaces with fewer than 8 points are skipped.
+pub fn vignetting_circles(
+    pts: &[(f64, DVec2, usize)],
+    plane_distance_mm: f64,
+    max_input_radius_mm: f64,
+) -> Option<PassNoPass> {
+    let mut surfaces: Vec<usize> = pts.iter().map(|p| p.2).collect();
+    surfaces.sort_unstable();
+    surfaces.dedup();
+    let (mut radii, mut sens) = (Vec::new(), Vec::new());
+    for s in surfaces {
+        let g: Vec<(f64, DVec2)> = pts
+            .iter()
+            .filter(|p| p.2 == s)
+            .map(|p| (p.0, p.1))
+            .collect();
+        if g.len() < 8 {
+            continue;
+        }
+        // x² + y² = A + B·(r·y) + C·r²  with A = R², B = 2s, C = −s².
+        let cols = vec![
+            g.iter().map(|_| 1.0).collect::<Vec<_>>(),
+            g.iter().map(|(r, p)| r * p.y).collect(),
+            g.iter().map(|(r, _)| r * r).collect(),
+        ];
+        let rhs = vec![
+            g.iter()
+                .map(|(_, p)| p.length_squared())
+                .collect::<Vec<_>>(),
+        ];
+        let sol = lstsq_qr(cols, rhs).ok()?;
+        let (mut rr, mut ss) = (sol.x[0][0].max(1e-12).sqrt(), 0.5 * sol.x[0][1]);
+        for _ in 0..30 {
+            let (mut a, mut b, mut c, mut g0, mut g1) = (0.0, 0.0, 0.0, 0.0, 0.0);
+            for (r, p) in &g {
+                let dy = p.y - ss * r;
+                let rho = (p.x * p.x + dy * dy).sqrt().max(1e-12);
+                let e = rho - rr;
+                let (j0, j1) = (-1.0, -dy * r / rho);
+                a += j0 * j0;
+                b += j0 * j1;
+                c += j1 * j1;
+                g0 += j0 * e;
+                g1 += j1 * e;
+            }
+            let det = a * c - b * b;
+            if !(det.abs() > 1e-300) {
+                // s undetermined (all points at r = 0): fit R only.
+                rr -= g0 / a;
+                continue;
+            }
+            rr -= (c * g0 - b * g1) / det;
+            ss -= (a * g1 - b * g0) / det;
+        }
+        if !(rr > 0.0 && rr.is_finite() && ss.is_finite()) {
+            return None;
+        }
+        radii.push(rr);
+        sens.push(ss);
+    }
+    (!radii.is_empty()).then_some(PassNoPass::Circles(Circles {
+        radii_mm: radii,
+        sensitivities: sens,
+        plane_distance_mm,
+        max_input_radius_mm: Some(max_input_radius_mm),
+    }))
+}
+
 /// Monomial exponents of total degree ≤ N, ordered by degree.
 pub fn monomials(degree: usize) -> Vec<[u32; 3]> {
     let mut t = Vec::new();
@@ -411,6 +528,198 @@ impl BlackBox<'_> {
     fn passes(&self, r: f64, p: DVec2) -> bool {
         self.trace(r, p.x, p.y).is_some()
     }
+    /// The surface whose semi-aperture blocks the ray aimed at `p`, if any.
+    fn blocked_at(&self, r: f64, p: DVec2) -> Option<usize> {
+        let o = DVec3::new(0.0, r, self.z_in);
+        let d = (DVec3::new(p.x, p.y, self.z_in + self.pass_distance) - o).normalize();
+        match self.lens.trace_to_scene(o, d, self.wavelength_nm) {
+            Err(Blocked::Aperture(i)) => Some(i),
+            _ => None,
+        }
+    }
+}
+
+/// Boundary points of a pass region and the aperture blocking just outside
+/// each (None: blocked otherwise, e.g. total internal reflection).
+type Boundary = (Vec<DVec2>, Vec<Option<usize>>);
+
+/// One traced black-box sample: input (r, dx, dy) on the input plane (point
+/// rotated onto +y), output (x, y, dx, dy, dz) on the output plane.
+pub type Sample = ([f64; 3], [f64; 5]);
+
+/// How the least squares weights the traced samples.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Weighting {
+    /// Every traced ray counts the same.
+    Uniform,
+    /// Each ray's weight is 1/σ(r)², σ(r) the RMS *aberration* of its field
+    /// radius: the residual of the output directions after the best affine
+    /// map from input direction (a perfect lens maps directions affinely),
+    /// plus `floor` × the largest σ. The fit then keeps every field's ray
+    /// errors small against that field's own geometric blur.
+    AberrationRelative { floor: f64 },
+}
+
+/// Per-sample least-squares weights.
+pub fn sample_weights(data: &[Sample], w: Weighting) -> Vec<f64> {
+    match w {
+        Weighting::Uniform => vec![1.0; data.len()],
+        Weighting::AberrationRelative { floor } => aberration_weights(data, floor),
+    }
+}
+
+fn aberration_weights(data: &[Sample], floor: f64) -> Vec<f64> {
+    // Group by field radius (the samples of one field share r exactly).
+    let mut groups: Vec<(f64, Vec<usize>)> = Vec::new();
+    for (i, s) in data.iter().enumerate() {
+        match groups.iter_mut().find(|g| g.0 == s.0[0]) {
+            Some(g) => g.1.push(i),
+            None => groups.push((s.0[0], vec![i])),
+        }
+    }
+    let sig: Vec<f64> = groups
+        .iter()
+        .map(|(_, idx)| affine_residual(data, idx))
+        .collect();
+    let smax = sig.iter().cloned().fold(0.0, f64::max);
+    let mut w = vec![1.0; data.len()];
+    for ((_, idx), s) in groups.iter().zip(&sig) {
+        let s = s + floor * smax;
+        let v = if s > 0.0 { 1.0 / (s * s) } else { 1.0 };
+        for &i in idx {
+            w[i] = v;
+        }
+    }
+    let m = w.iter().cloned().fold(0.0, f64::max);
+    w.iter().map(|v| v / m).collect()
+}
+
+/// RMS residual of the output directions of samples `idx` after the best
+/// affine function of the input direction.
+fn affine_residual(data: &[Sample], idx: &[usize]) -> f64 {
+    if idx.len() < 6 {
+        return 0.0;
+    }
+    let cols: Vec<Vec<f64>> = vec![
+        idx.iter().map(|_| 1.0).collect(),
+        idx.iter().map(|&i| data[i].0[1]).collect(),
+        idx.iter().map(|&i| data[i].0[2]).collect(),
+    ];
+    let rhs: Vec<Vec<f64>> = (2..4)
+        .map(|k| idx.iter().map(|&i| data[i].1[k]).collect())
+        .collect();
+    let Ok(sol) = lstsq_qr(cols, rhs.clone()) else {
+        return 0.0;
+    };
+    let mut ss = 0.0;
+    for (k, x) in sol.x.iter().enumerate() {
+        for (j, &i) in idx.iter().enumerate() {
+            let p = x[0] + x[1] * data[i].0[1] + x[2] * data[i].0[2];
+            ss += (p - rhs[k][j]).powi(2);
+        }
+    }
+    (ss / idx.len() as f64).sqrt()
+}
+
+/// Weighted least-squares fit of outx, outy, outdx, outdy, outdz (slots 0,
+/// 1, 3, 4, 5 of the returned array; slot 2 — outz — is left None) with all
+/// monomials up to `degree`; reports carry the unweighted residuals.
+pub fn fit_polys(
+    data: &[Sample],
+    weights: &[f64],
+    degree: usize,
+    wl: f64,
+    lens_name: &str,
+) -> Result<([Option<Poly>; 6], Vec<FitReport>)> {
+    let mut reports = Vec::new();
+    let terms = monomials(degree);
+    if data.len() < 2 * terms.len() {
+        return Err(Error::Invalid(format!(
+            "lens '{}': {} traced samples for {} monomials; use more samples or a lower degree",
+            lens_name,
+            data.len(),
+            terms.len()
+        )));
+    }
+    if weights.len() != data.len() || weights.iter().any(|w| !(*w > 0.0 && w.is_finite())) {
+        return Err(Error::Invalid("least squares: bad sample weights".into()));
+    }
+    let sw: Vec<f64> = weights.iter().map(|w| w.sqrt()).collect();
+    let r_s = data.iter().map(|s| s.0[0].abs()).fold(1e-9, f64::max);
+    let d_s = data
+        .iter()
+        .map(|s| s.0[1].abs().max(s.0[2].abs()))
+        .fold(1e-12, f64::max);
+    let deg = degree + 1;
+    let pows = |v: f64| {
+        let mut p = vec![1.0; deg];
+        for i in 1..deg {
+            p[i] = p[i - 1] * v;
+        }
+        p
+    };
+    let rows: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)> = data
+        .iter()
+        .map(|s| (pows(s.0[0] / r_s), pows(s.0[1] / d_s), pows(s.0[2] / d_s)))
+        .collect();
+    let mut cols: Vec<Vec<f64>> = terms
+        .iter()
+        .map(|t| {
+            rows.iter()
+                .zip(&sw)
+                .map(|((a, b, c), w)| w * a[t[0] as usize] * b[t[1] as usize] * c[t[2] as usize])
+                .collect()
+        })
+        .collect();
+    let col_norm: Vec<f64> = cols
+        .iter()
+        .map(|c| c.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-300))
+        .collect();
+    for (c, n) in cols.iter_mut().zip(&col_norm) {
+        c.iter_mut().for_each(|v| *v /= n);
+    }
+    let rhs: Vec<Vec<f64>> = (0..5)
+        .map(|k| data.iter().zip(&sw).map(|(s, w)| w * s.1[k]).collect())
+        .collect();
+    let sol = lstsq_qr(cols, rhs)?;
+    let names = ["outx", "outy", "outdx", "outdy", "outdz"];
+    let slots = [0usize, 1, 3, 4, 5];
+    let mut outputs: [Option<Poly>; 6] = Default::default();
+    for (k, x) in sol.x.iter().enumerate() {
+        let coeff: Vec<f64> = terms
+            .iter()
+            .zip(x)
+            .zip(&col_norm)
+            .map(|((t, c), n)| c / n / (r_s.powi(t[0] as i32) * d_s.powi((t[1] + t[2]) as i32)))
+            .collect();
+        let poly = Poly {
+            terms: terms.clone(),
+            coeff,
+        };
+        let res: Vec<f64> = data
+            .iter()
+            .map(|s| poly.eval(s.0[0], s.0[1], s.0[2]) - s.1[k])
+            .collect();
+        if res.iter().any(|v| !v.is_finite()) {
+            return Err(Error::Invalid(format!(
+                "lens '{}': degree-{} fit of {} is not finite",
+                lens_name, degree, names[k]
+            )));
+        }
+        reports.push(FitReport {
+            wavelength_nm: wl,
+            output: names[k].to_string(),
+            degree,
+            n_terms: terms.len(),
+            n_samples: data.len(),
+            n_dropped: terms.len() - sol.rank,
+            condition_number: sol.condition_number,
+            rms_residual: (res.iter().map(|v| v * v).sum::<f64>() / res.len() as f64).sqrt(),
+            max_residual: res.iter().map(|v| v.abs()).fold(0.0, f64::max),
+        });
+        outputs[slots[k]] = Some(poly);
+    }
+    Ok((outputs, reports))
 }
 
 /// Sag of surface `s` at its rim towards +z (scene) and −z (film), mm.
@@ -470,7 +779,8 @@ pub fn fit_rtf_degrees(
     // Pixel 4a file): each input point then is (nearly) a film point, and the
     // pass region is that film point's vignetted pupil, which an ellipse fits
     // far better than the half-plane cuts the rear rim makes close to the lens.
-    let offset_in = (0.98 * px.back_focal_distance_mm).max(rear_sag + 0.01 * f);
+    let offset_in =
+        (opts.input_plane_fraction * px.back_focal_distance_mm).max(rear_sag + 0.01 * f);
     let offset_out = front_sag + 0.01 * f;
     let track = lens.total_track_mm();
     let mut per_degree: Vec<(Vec<RtfWave>, Vec<FitReport>)> =
@@ -534,7 +844,7 @@ pub fn fit_rtf_degrees(
         let r_end = lo;
         let region = |r: f64| -> Option<(DVec2, f64)> { grid_pass(r, 48).map(|c| (c, half)) };
         // Boundary points of the pass region at radius r.
-        let boundary = |r: f64| -> Option<Vec<DVec2>> {
+        let boundary = |r: f64| -> Option<Boundary> {
             let (centre, half) = region(r)?;
             let c = DVec2::new(0.0, centre.y);
             if !bb.passes(r, c) {
@@ -542,6 +852,7 @@ pub fn fit_rtf_degrees(
             }
             let na = 64;
             let mut pts = Vec::with_capacity(2 * na);
+            let mut surf = Vec::with_capacity(2 * na);
             for a in 0..na {
                 let th = std::f64::consts::TAU * (a as f64 + 0.5) / na as f64;
                 let dir = DVec2::new(th.cos(), th.sin());
@@ -557,14 +868,17 @@ pub fn fit_rtf_degrees(
                 let p = c + dir * lo;
                 pts.push(p);
                 pts.push(DVec2::new(-p.x, p.y));
+                let by = bb.blocked_at(r, c + dir * hi);
+                surf.push(by);
+                surf.push(by);
             }
-            Some(pts)
+            Some((pts, surf))
         };
         // Boundaries of the pass region per field radius.
         let radii: Vec<f64> = (0..opts.n_ellipses)
             .map(|k| r_end * k as f64 / (opts.n_ellipses - 1) as f64)
             .collect();
-        let bounds: Vec<Option<Vec<DVec2>>> = radii.par_iter().map(|&r| boundary(r)).collect();
+        let bounds: Vec<Option<Boundary>> = radii.par_iter().map(|&r| boundary(r)).collect();
         let n_ok = bounds.iter().take_while(|e| e.is_some()).count();
         if n_ok < 4 {
             return Err(Error::Invalid(format!(
@@ -572,13 +886,14 @@ pub fn fit_rtf_degrees(
                 lens.name
             )));
         }
-        let bounds: Vec<Vec<DVec2>> = bounds.into_iter().take(n_ok).map(|b| b.unwrap()).collect();
+        let (bounds, blockers): (Vec<Vec<DVec2>>, Vec<Vec<Option<usize>>>) =
+            bounds.into_iter().take(n_ok).map(|b| b.unwrap()).unzip();
         let radii = &radii[..n_ok];
-        let ellipses = || -> Result<PassNoPass> {
+        let ellipses = |method: PassMethod| -> Result<PassNoPass> {
             let ell: Vec<(DVec2, [f64; 2])> = bounds
                 .par_iter()
                 .map(|pts| {
-                    if opts.pass_method == PassMethod::AreaEllipses {
+                    if method != PassMethod::Ellipses {
                         return area_matched_ellipse(pts);
                     }
                     let (c, a) = min_area_ellipse(pts, 1e-7)?;
@@ -599,16 +914,39 @@ pub fn fit_rtf_degrees(
                 plane_distance_mm: pass_distance,
             }))
         };
-        let pass = ellipses()?;
+        // The polynomial data are sampled inside the area-matched ellipses
+        // whatever the pass/no-pass representation, so the polynomials do
+        // not depend on that choice.
+        let sampling = ellipses(PassMethod::AreaEllipses)?;
         let r_last = radii[n_ok - 1];
+        let pass = match opts.pass_method {
+            PassMethod::Circles => {
+                let pts: Vec<(f64, DVec2, usize)> = radii
+                    .iter()
+                    .zip(bounds.iter().zip(&blockers))
+                    .flat_map(|(&r, (p, b))| {
+                        p.iter()
+                            .zip(b)
+                            .filter_map(move |(p, b)| b.map(|i| (r, *p, i)))
+                    })
+                    .collect();
+                vignetting_circles(&pts, pass_distance, r_last).ok_or_else(|| {
+                    Error::Invalid(format!(
+                        "lens '{}': could not fit vignetting circles",
+                        lens.name
+                    ))
+                })?
+            }
+            m => ellipses(m)?,
+        };
         // Polynomial data: polar grid inside each field's ellipse.
         let fields: Vec<f64> = (0..opts.n_field)
             .map(|k| r_last * k as f64 / (opts.n_field - 1) as f64)
             .collect();
-        let data: Vec<([f64; 3], [f64; 5])> = fields
+        let data: Vec<Sample> = fields
             .par_iter()
             .flat_map_iter(|&r| {
-                let [x0, x1, y0, y1] = pass.bbox(r).unwrap_or([0.0; 4]);
+                let [x0, x1, y0, y1] = sampling.bbox(r).unwrap_or([0.0; 4]);
                 let (cx, cy, rx, ry) = (
                     0.5 * (x0 + x1),
                     0.5 * (y0 + y1),
@@ -631,93 +969,11 @@ pub fn fit_rtf_degrees(
                 v
             })
             .collect();
+        let weights = sample_weights(&data, opts.weighting);
         for (di, &degree) in degrees.iter().enumerate() {
             let (waves, reports) = &mut per_degree[di];
-            let terms = monomials(degree);
-            if data.len() < 2 * terms.len() {
-                return Err(Error::Invalid(format!(
-                    "lens '{}': {} traced samples for {} monomials; use more samples or a lower degree",
-                    lens.name,
-                    data.len(),
-                    terms.len()
-                )));
-            }
-            let r_s = r_last.max(1e-9);
-            let d_s = data
-                .iter()
-                .map(|s| s.0[1].abs().max(s.0[2].abs()))
-                .fold(1e-12, f64::max);
-            let deg = degree + 1;
-            let pows = |v: f64| {
-                let mut p = vec![1.0; deg];
-                for i in 1..deg {
-                    p[i] = p[i - 1] * v;
-                }
-                p
-            };
-            let rows: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)> = data
-                .iter()
-                .map(|s| (pows(s.0[0] / r_s), pows(s.0[1] / d_s), pows(s.0[2] / d_s)))
-                .collect();
-            let mut cols: Vec<Vec<f64>> = terms
-                .iter()
-                .map(|t| {
-                    rows.iter()
-                        .map(|(a, b, c)| a[t[0] as usize] * b[t[1] as usize] * c[t[2] as usize])
-                        .collect()
-                })
-                .collect();
-            let col_norm: Vec<f64> = cols
-                .iter()
-                .map(|c| c.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-300))
-                .collect();
-            for (c, n) in cols.iter_mut().zip(&col_norm) {
-                c.iter_mut().for_each(|v| *v /= n);
-            }
-            let rhs: Vec<Vec<f64>> = (0..5)
-                .map(|k| data.iter().map(|s| s.1[k]).collect())
-                .collect();
-            let sol = lstsq_qr(cols, rhs)?;
-            let names = ["outx", "outy", "outdx", "outdy", "outdz"];
-            let slots = [0usize, 1, 3, 4, 5];
-            let mut outputs: [Option<Poly>; 6] = Default::default();
-            for (k, x) in sol.x.iter().enumerate() {
-                let coeff: Vec<f64> = terms
-                    .iter()
-                    .zip(x)
-                    .zip(&col_norm)
-                    .map(|((t, c), n)| {
-                        c / n / (r_s.powi(t[0] as i32) * d_s.powi((t[1] + t[2]) as i32))
-                    })
-                    .collect();
-                let poly = Poly {
-                    terms: terms.clone(),
-                    coeff,
-                };
-                let res: Vec<f64> = data
-                    .iter()
-                    .map(|s| poly.eval(s.0[0], s.0[1], s.0[2]) - s.1[k])
-                    .collect();
-                if res.iter().any(|v| !v.is_finite()) {
-                    return Err(Error::Invalid(format!(
-                        "lens '{}': degree-{} fit of {} is not finite",
-                        lens.name, degree, names[k]
-                    )));
-                }
-                reports.push(FitReport {
-                    wavelength_nm: wl,
-                    output: names[k].to_string(),
-                    degree,
-                    n_terms: terms.len(),
-                    n_samples: data.len(),
-                    n_dropped: terms.len() - sol.rank,
-                    condition_number: sol.condition_number,
-                    rms_residual: (res.iter().map(|v| v * v).sum::<f64>() / res.len() as f64)
-                        .sqrt(),
-                    max_residual: res.iter().map(|v| v.abs()).fold(0.0, f64::max),
-                });
-                outputs[slots[k]] = Some(poly);
-            }
+            let (mut outputs, reps) = fit_polys(&data, &weights, degree, wl, &lens.name)?;
+            reports.extend(reps);
             outputs[2] = Some(Poly {
                 terms: vec![[0, 0, 0]],
                 coeff: vec![offset_in + track + offset_out],
@@ -805,5 +1061,39 @@ mod tests {
             (1.0 / a[0][0].sqrt() - 2.0).abs() < 1e-3 && (1.0 / a[1][1].sqrt() - 0.5).abs() < 1e-3
         );
         assert!(a[0][1].abs() < 1e-4);
+    }
+
+    /// Vignetting circles: boundary points of an intersection of two known
+    /// circles (radius R, centre (0, s·r)) over several input radii give
+    /// those circles back.
+    #[test]
+    fn vignetting_circles_recover_known_circles() {
+        let truth = [(0usize, 2.0, 0.0), (3usize, 2.5, 0.3)];
+        let mut pts = Vec::new();
+        for k in 0..6 {
+            let r = 1.5 * k as f64;
+            for a in 0..64 {
+                let th = std::f64::consts::TAU * (a as f64 + 0.5) / 64.0;
+                for &(surf, rad, s) in &truth {
+                    let p = DVec2::new(rad * th.cos(), s * r + rad * th.sin());
+                    // Keep the part of each circle inside the other one.
+                    let inside = truth.iter().all(|&(_, r2, s2)| {
+                        p.x * p.x + (p.y - s2 * r).powi(2) <= r2 * r2 * (1.0 + 1e-12)
+                    });
+                    if inside {
+                        pts.push((r, p, surf));
+                    }
+                }
+            }
+        }
+        let Some(PassNoPass::Circles(c)) = vignetting_circles(&pts, 10.0, 7.5) else {
+            panic!("no circles");
+        };
+        assert_eq!(c.radii_mm.len(), 2);
+        for (k, &(_, rad, s)) in truth.iter().enumerate() {
+            assert!((c.radii_mm[k] - rad).abs() < 1e-9, "{:?}", c);
+            assert!((c.sensitivities[k] - s).abs() < 1e-9, "{:?}", c);
+        }
+        assert_eq!(c.max_input_radius_mm, Some(7.5));
     }
 }

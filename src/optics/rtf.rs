@@ -44,6 +44,23 @@
 //! plane were displaced along z (a displaced plane shifts every ray's origin
 //! and defocuses the image of a near object).
 //!
+//! Film distance of the paper's Pixel 4a file (measured, `camsim lens info
+//! --film-distance-mm D`, column `beam_vergence_per_m`): the on-axis beam is
+//! parallel (vergence −0.003 1/m) at D = 0.48060 mm, the infinity film
+//! distance `lens info` reports. The paper's 0.465136 mm (Fig. 5 and its
+//! Cornell box) is 1 µm behind this file's input plane (`planeoffsetinput`
+//! 0.464136) — the black box's own image surface — and 15 µm *inside*
+//! infinity focus: vergence −0.82 1/m, i.e. focus beyond infinity, as
+//! Newton's relation Δ/f² = −0.81 1/m predicts (f = 4.368 mm). It is not
+//! a finite focus distance, and the output-plane convention cannot make it
+//! one: vergence near infinity does not depend on where the output plane
+//! is, and moving it by planeoffsetinput shifts a focus by only 0.46 mm.
+//! The paper's set-up pairs 0.49234 mm ↔ 0.5 m and 0.57624 mm ↔ 0.3 m
+//! focus; this file gives 0.61 1/m (1.6 m) and 4.72 1/m (0.21 m) there.
+//! Relative illumination barely depends on it (the Fig. 5 acceptance
+//! holds at 0.465136), but depth of field does: use `lens info` to choose
+//! film distances for a focus distance.
+//!
 //! Radiometry: the pass plane is parallel to the film, so sampling a point
 //! uniformly in a box of area A on it gives weight A·h²/dist⁴ (projected
 //! solid angle, h = film-to-pass-plane distance), with rays outside the
