@@ -8,7 +8,10 @@
 //!   irradiance (see `optics` conventions); geometry in metres.
 //! - Pixel estimate: box filter over the pixel area; `spp` samples split
 //!   round-robin into `batches` independent batches; the standard error is the
-//!   spread of the batch means, √(Σ(mₖ−m)²/(B(B−1))).
+//!   spread of the batch means, √(Σ(mₖ−m)²/(B(B−1))). Within a batch the film
+//!   positions are stratified (`film::stratify`: distinct cells of an m×m
+//!   grid, m = ⌈√n⌉, jittered), which cuts the noise of pixels that straddle
+//!   an edge or an emitter boundary; batches stay independent.
 //! - Determinism: sample `s` of pixel `(x, y)` uses a PCG32 stream keyed by
 //!   `(seed, y·width + x, s)` and pixels are reduced in a fixed order, so any
 //!   thread count and any region of interest give bit-identical pixels.
