@@ -11,9 +11,10 @@
 //!   in f64 and pbrt-v4's conservative `t > δt` check. Spheres and disks keep
 //!   the scalar tests.
 //! - Box test: slabs with the near/far plane chosen by the sign of the
-//!   direction (so empty lanes, stored as an inverted box, never hit), NaN-
-//!   ignoring min/max (a ray lying in a slab plane counts as inside), and the
-//!   far distance widened by 1 + 2γ(3) as pbrt does for robustness.
+//!   direction (so empty lanes, stored as an inverted box, never hit), the
+//!   inverse direction clamped to ±1e30 (no NaN; a ray lying in a slab plane
+//!   counts as inside), and the far distance widened by 1 + 2γ(3) as pbrt does
+//!   for robustness.
 //! - Closest hit visits children near to far and skips any whose entry
 //!   distance lies beyond the closest hit found so far.
 //!
@@ -95,7 +96,18 @@ impl RayPre {
         let kz = tri.kz as usize;
         let kx = (kz + 1) % 3;
         let ky = (kx + 1) % 3;
-        let inv = [1.0 / d.x, 1.0 / d.y, 1.0 / d.z];
+        // Inverse direction clamped to ±1e30: a zero (or denormal) component
+        // then gives finite slab distances, never 0·∞ = NaN, so the box test
+        // can use plain min/max. The clamp only moves slab crossings that lie
+        // beyond ~1e30·(distance to the plane), far outside any scene.
+        let inv = [d.x, d.y, d.z].map(|c| {
+            let i = 1.0 / c;
+            if i.abs() <= 1e30 {
+                i
+            } else {
+                1e30f32.copysign(c)
+            }
+        });
         RayPre {
             inv: inv.map(f32x4::splat),
             os: [f32x4::splat(o.x), f32x4::splat(o.y), f32x4::splat(o.z)],
@@ -114,8 +126,8 @@ impl RayPre {
         for a in 0..3 {
             let t0 = (n.b[self.near[a]][a] - self.os[a]) * self.inv[a];
             let t1 = (n.b[1 - self.near[a]][a] - self.os[a]) * self.inv[a];
-            tn = tn.max(t0);
-            tf = tf.min(t1);
+            tn = tn.fast_max(t0);
+            tf = tf.fast_min(t1);
         }
         tf *= f32x4::splat(1.0 + 2.0 * gamma(3));
         (tn.simd_le(tf).to_bitmask(), tn.to_array())
@@ -164,6 +176,10 @@ impl RayPre {
         }
         let neg = e0.simd_lt(zero) | e1.simd_lt(zero) | e2.simd_lt(zero);
         let pos = e0.simd_gt(zero) | e1.simd_gt(zero) | e2.simd_gt(zero);
+        let inside = !(neg & pos).to_bitmask() & valid;
+        if inside == 0 {
+            return (0, [zero; 4]);
+        }
         let det = e0 + e1 + e2;
         for z in &mut pz {
             *z *= sz;
@@ -172,7 +188,7 @@ impl RayPre {
         let tmd = f32x4::splat(tmax) * det;
         let in_neg = det.simd_lt(zero) & t_scaled.simd_lt(zero) & t_scaled.simd_ge_(tmd);
         let in_pos = det.simd_gt(zero) & t_scaled.simd_gt(zero) & t_scaled.simd_le(tmd);
-        let mut mask = (in_neg | in_pos).to_bitmask() & !(neg & pos).to_bitmask() & valid;
+        let mut mask = (in_neg | in_pos).to_bitmask() & inside;
         if mask == 0 {
             return (0, [zero; 4]);
         }
