@@ -29,7 +29,10 @@
 //!   `reference-spp` (rendered with the variant's seed) — the error against
 //!   that reference ([`crate::measure::convergence`]). Sensor measurements keep
 //!   the sensor's noise, which puts a floor under their standard error; the
-//!   optical-image measurement `ri` shows the pure Monte Carlo error.
+//!   optical-image measurement `ri` shows the pure Monte Carlo error. MCC
+//!   patch means with clipped pixels in any run are not fitted (their
+//!   standard error collapses with the noise, not as t^(−½)); they get a
+//!   `<q>/clipped_fraction` figure instead.
 
 use super::apply::{ApplyError, as_int, as_str, describe};
 use super::source::Span;
@@ -638,9 +641,28 @@ pub fn convergence(m: &Measure, spec: &ResolvedExperiment) -> Result<Measured> {
         ));
     }
     let matches = |q: &str| filter.is_none_or(|f| q.contains(f));
-    let mut followed = 0;
+    let (mut followed, mut clipped_out) = (0, 0);
     for f0 in runs[0].1.0.iter().filter(|f| matches(&f.quantity)) {
         let q = &f0.quantity;
+        // A figure of clipped pixels (an MCC patch at the white level) does not
+        // follow Monte Carlo noise: report how much clipped, fit nothing.
+        let clipped = crate::measure::mcc::clipped_flag(q).map_or(0.0, |flag| {
+            runs.iter()
+                .flat_map(|(_, (figs, _))| figs.iter().filter(|f| f.quantity == flag))
+                .map(|f| f.value)
+                .fold(0.0, f64::max)
+        });
+        if clipped > 0.0 {
+            out.figures.push(Figure::new(
+                &m.name,
+                format!("{q}/clipped_fraction"),
+                "1",
+                clipped,
+                0.0,
+            ));
+            clipped_out += 1;
+            continue;
+        }
         let (spp_of, series): (Vec<u64>, Vec<crate::measure::convergence::Run>) = runs
             .iter()
             .filter_map(|(spp, (figs, dt))| {
@@ -688,11 +710,18 @@ pub fn convergence(m: &Measure, spec: &ResolvedExperiment) -> Result<Measured> {
     }
     if followed == 0 {
         return Err(Error::invalid(format!(
-            "convergence '{}': no figure of '{of}'{} has a standard error in ≥ 2 runs",
+            "convergence '{}': no figure of '{of}'{} has a standard error in ≥ 2 runs{}",
             m.name,
             filter
                 .map(|q| format!(" matching quantity=\"{q}\""))
-                .unwrap_or_default()
+                .unwrap_or_default(),
+            if clipped_out > 0 {
+                format!(
+                    " ({clipped_out} left out because their pixels clip at the sensor's white level or floor; shorten the exposure)"
+                )
+            } else {
+                String::new()
+            }
         )));
     }
     Ok(out)
