@@ -630,3 +630,32 @@ fn convergence_leaves_out_clipped_mcc_patches() {
     // Patch 24 (black) is far from the white level and still followed.
     get(&rows, "convergence", "patch24/g_mean/spp16_stderr");
 }
+
+/// Regression (session 1: the KDL Cornell box with the generic sensor "gave
+/// 0 DV MCC means"): a chart that receives no signal is an error that says
+/// so, with the exposure, instead of 72 figures of 0 DV. At 1 ns the chart
+/// collects ≈1e-8 of its 0.5 s signal (hundreds of DV): far below 1 DV.
+#[test]
+fn dark_mcc_is_an_error_not_zero_dv() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let exp = d.join("dark.kdl");
+    std::fs::write(
+        &exp,
+        format!(
+            "experiment \"dark\" {{\n    scene \"{}\"\n    add \"mcc\" target=\"mcc\"\n    sensor \"{}\" exposure-s=1e-9\n    render spp=1 max-bounces=1\n    measure \"mcc\" of=\"mcc\"\n}}\n",
+            root.join("scenes/cornell-box.kdl").display(),
+            root.join("sensors/generic.kdl").display(),
+        ),
+    )
+    .unwrap();
+    let out = d.join("out");
+    let r = camsim(&["run", exp.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert_eq!(r.status.code(), Some(1), "{}", stderr(&r));
+    let e = stderr(&r);
+    assert!(
+        e.contains("chart 'mcc' is dark") && e.contains("1.000e-9 s") && e.contains("exposure-s"),
+        "{e}"
+    );
+}

@@ -205,14 +205,42 @@ pub fn patch_means_of_sensor(
     let views = super::plane::channel_views(&plane, "y");
     // DV 0 and the white level are the ADC's clip levels (black subtracted here).
     let clip = (-img.black_level_dv, img.white_level_dv - img.black_level_dv);
-    patch_means_clipped(
+    let patches = patch_means_clipped(
         &views,
         &img.labels,
         &img.label_names,
         chart,
         erode_fraction,
         Some(clip),
-    )
+    )?;
+    check_not_dark(&patches, chart, img.exposure_s)?;
+    Ok(patches)
+}
+
+/// Refuse a chart with no signal: when no patch channel's mean rises above
+/// 1 DV and 3 standard errors, the figures would be 0 DV of noise. Says what
+/// to check instead (session 1 met "0 DV MCC means" without a word).
+pub fn check_not_dark(patches: &[Patch], chart: &str, exposure_s: f64) -> Result<()> {
+    let brightest = patches
+        .iter()
+        .flat_map(|p| p.means.iter().map(move |m| (p, m)))
+        .max_by(|a, b| a.1.1.total_cmp(&b.1.1));
+    let Some((p, (c, v, se))) = brightest else {
+        return Ok(());
+    };
+    let lit = patches
+        .iter()
+        .flat_map(|p| &p.means)
+        .any(|(_, v, se)| *v > 1.0 && *v > 3.0 * se);
+    if lit {
+        return Ok(());
+    }
+    Err(Error::invalid(format!(
+        "chart '{chart}' is dark: its brightest patch ({}, channel {c}) reads {v:.3} ± {se:.3} DV above black at an exposure of {exposure_s:.3e} s; \
+         no patch rises above 1 DV and its noise. Expose longer (sensor exposure-s=…), check the light's emission units (radiance in W/(sr·m²·nm)) \
+         and that the chart faces the camera and is lit",
+        p.name
+    )))
 }
 
 /// Figures `patchNN/<ch>_mean` (DV), `patchNN/<ch>_clipped_fraction` where
