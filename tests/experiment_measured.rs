@@ -522,8 +522,13 @@ fn dng_capture_is_measured_per_cfa_channel_and_matches_the_png() {
             dv[(y * w + x) as usize] = 64 + plane.get(x as usize, y as usize) as u16;
         }
     }
-    camsim::measure::io::write_dng_cfa(&d.join("chart.dng"), w, h, &dv, &cfa, 64.0, 65535.0)
-        .unwrap();
+    let raw = camsim::image::SensorImage::from_raw_dv(w, h, &cfa, &dv, 64.0, 65535.0);
+    camsim::sensor::output::write_dng(
+        &d.join("chart.dng"),
+        &raw,
+        &camsim::sensor::SensorConfig::generic(),
+    )
+    .unwrap();
     let exp = d.join("dng.kdl");
     std::fs::write(
         &exp,
