@@ -107,7 +107,6 @@ pub fn roi_px(v: &Value) -> Result<Rect, ApplyError> {
 pub fn check_references(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError)> {
     for m in &spec.measures {
         let at = |k: &str| m.value_spans.get(k).copied().unwrap_or(m.span);
-        let name_at = |k: &str| m.param_spans.get(k).copied().unwrap_or(m.span);
         if let Some(v) = m.params.get("input") {
             let name = as_str(v, "input").map_err(|e| (at("input"), e))?;
             let c = check_input_name(spec, name).map_err(|e| (at("input"), e))?;
@@ -158,30 +157,11 @@ pub fn check_references(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyErr
         }
         match m.kind.as_str() {
             "compare" => {
-                const KNOWN: &[&str] = &["reference", "quantity", "normalize"];
-                if let Some(u) = m.params.unknown(KNOWN).first() {
-                    let e = crate::experiment::hooks::ParamError::unknown(u, KNOWN);
-                    return Err((
-                        name_at(u),
-                        ApplyError {
-                            message: e.message,
-                            help: e.help,
-                            on_path: false,
-                        },
-                    ));
-                }
-                let of = match m.of.as_slice() {
-                    [one] => one.as_str(),
-                    _ => {
-                        return Err((
-                            at("of"),
-                            ApplyError::new(
-                                "compare needs of=\"<measurement>\" (one simulated measurement)",
-                            )
-                            .help("e.g. measure \"compare\" of=\"mcc\" reference=\"mcc-measured\""),
-                        ));
-                    }
-                };
+                let of = known_and_single_of(
+                    m,
+                    &["reference", "quantity", "normalize"],
+                    "e.g. measure \"compare\" of=\"mcc\" reference=\"mcc-measured\"",
+                )?;
                 check_measurement_ref(spec, m, of).map_err(|e| (at("of"), e))?;
                 let r = match m.params.get("reference") {
                     Some(v) => as_str(v, "reference").map_err(|e| (at("reference"), e))?,
@@ -216,28 +196,11 @@ pub fn check_references(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyErr
                 }
             }
             "convergence" => {
-                const KNOWN: &[&str] = &["spp", "reference-spp", "quantity"];
-                if let Some(u) = m.params.unknown(KNOWN).first() {
-                    let e = crate::experiment::hooks::ParamError::unknown(u, KNOWN);
-                    return Err((
-                        name_at(u),
-                        ApplyError {
-                            message: e.message,
-                            help: e.help,
-                            on_path: false,
-                        },
-                    ));
-                }
-                let of = match m.of.as_slice() {
-                    [one] => one.as_str(),
-                    _ => {
-                        return Err((
-                            at("of"),
-                            ApplyError::new("convergence needs of=\"<measurement>\" (one simulated measurement)")
-                                .help("e.g. measure \"convergence\" of=\"sfr\" spp=(16 64 256)"),
-                        ));
-                    }
-                };
+                let of = known_and_single_of(
+                    m,
+                    &["spp", "reference-spp", "quantity"],
+                    "e.g. measure \"convergence\" of=\"sfr\" spp=(16 64 256)",
+                )?;
                 let t = check_measurement_ref(spec, m, of).map_err(|e| (at("of"), e))?;
                 if !CONVERGENCE_KINDS.contains(&t.kind.as_str()) || t.params.get("input").is_some()
                 {
@@ -268,6 +231,38 @@ pub fn check_references(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyErr
         }
     }
     Ok(())
+}
+
+/// The checks `compare` and `convergence` share: only the `known` properties
+/// (an unknown one is reported at its name, with a did-you-mean), and exactly
+/// one `of=` measurement, which is returned.
+fn known_and_single_of<'a>(
+    m: &'a Measure,
+    known: &[&str],
+    example: &str,
+) -> Result<&'a str, (Span, ApplyError)> {
+    if let Some(u) = m.params.unknown(known).first() {
+        let e = crate::experiment::hooks::ParamError::unknown(u, known);
+        return Err((
+            m.param_spans.get(*u).copied().unwrap_or(m.span),
+            ApplyError {
+                message: e.message,
+                help: e.help,
+                on_path: false,
+            },
+        ));
+    }
+    match m.of.as_slice() {
+        [one] => Ok(one.as_str()),
+        _ => Err((
+            m.value_spans.get("of").copied().unwrap_or(m.span),
+            ApplyError::new(format!(
+                "{} needs of=\"<measurement>\" (one simulated measurement)",
+                m.kind
+            ))
+            .help(example),
+        )),
+    }
 }
 
 /// Another measurement of the experiment named `name` (not `m`, not a compare/convergence).
