@@ -137,6 +137,8 @@ pub struct Sfr {
     pub rows_used: usize,
     /// RMS MTF from pixel noise alone at 0.5 cy/px (see `noise_floor`).
     pub noise_floor_nyquist: f64,
+    /// Its jackknife standard error.
+    pub noise_floor_stderr: f64,
     pub transposed: bool,
     pub pixel_pitch_m: Option<f64>,
 }
@@ -197,7 +199,7 @@ impl Sfr {
             "mtf_noise@0.5cy/px",
             "1",
             self.noise_floor_nyquist,
-            0.0,
+            self.noise_floor_stderr,
         ));
         figures.push(Figure::new(
             measurement,
@@ -752,10 +754,8 @@ pub fn sfr(plane: &Plane, opts: &SfrOptions) -> Result<Sfr> {
     // Refuse an edge whose contrast is too low for its noise: the MTF at
     // 0.5 cy/px (the highest reported figure) would be noise.
     let f_check = 0.5f64.min(fmax);
-    let floor_check = {
-        let i = ((f_check * nbins as f64 / 4.0).round() as usize).min(full.noise_floor.len() - 1);
-        full.noise_floor[i]
-    };
+    let i_check = ((f_check * nbins as f64 / 4.0).round() as usize).min(full.noise_floor.len() - 1);
+    let floor_check = full.noise_floor[i_check];
     if floor_check > MAX_NOISE_FLOOR {
         return Err(Error::invalid(format!(
             "edge contrast {:.4} is too low for its noise ({:.4} rms per pixel, contrast/noise {:.1}): noise alone gives MTF ≈ {:.3} at {f_check} cy/px (limit {MAX_NOISE_FLOOR}); render more samples per pixel, expose longer or use a taller region",
@@ -767,8 +767,8 @@ pub fn sfr(plane: &Plane, opts: &SfrOptions) -> Result<Sfr> {
     }
     // Jackknife over contiguous row blocks.
     let g = opts.jackknife_groups.max(4).min(nlin / 2);
-    let (mut se_mtf, mut se50, mut se_ang, mut se_fwhm) =
-        (vec![0.0; full.mtf.len()], 0.0, 0.0, 0.0);
+    let (mut se_mtf, mut se50, mut se_ang, mut se_fwhm, mut se_floor) =
+        (vec![0.0; full.mtf.len()], 0.0, 0.0, 0.0, 0.0);
     let esf_x_px: Vec<f64> = (0..nbins)
         .map(|i| (i as f64 + 0.5) / 4.0 - nbins as f64 / 8.0)
         .collect();
@@ -790,6 +790,12 @@ pub fn sfr(plane: &Plane, opts: &SfrOptions) -> Result<Sfr> {
                 *s = jackknife_se(&reps.iter().map(|r| r.mtf[i]).collect::<Vec<_>>());
             }
             se_ang = jackknife_se(&reps.iter().map(|r| r.angle_deg).collect::<Vec<_>>());
+            se_floor = jackknife_se(
+                &reps
+                    .iter()
+                    .map(|r| r.noise_floor[i_check])
+                    .collect::<Vec<_>>(),
+            );
             se_fwhm = jackknife_se(
                 &reps
                     .iter()
@@ -820,6 +826,7 @@ pub fn sfr(plane: &Plane, opts: &SfrOptions) -> Result<Sfr> {
         lsf_fwhm_stderr_px: se_fwhm,
         rows_used: nlin,
         noise_floor_nyquist: floor_check,
+        noise_floor_stderr: se_floor,
         transposed,
         pixel_pitch_m: opts.pixel_pitch_m,
     })
