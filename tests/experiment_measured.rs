@@ -398,8 +398,7 @@ fn compare_pairs_figures_by_quantity_and_unit() {
         of: vec!["sim".into()],
         params,
         span: Default::default(),
-        param_spans: Default::default(),
-        value_spans: Default::default(),
+        spans: Default::default(),
     };
     // sim = reference + (+3, −4): RMSE = √((9 + 16)/2) = √12.5; a figure only
     // in one of them, or in another unit, is not paired.

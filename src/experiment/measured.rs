@@ -106,7 +106,7 @@ pub fn roi_px(v: &Value) -> Result<Rect, ApplyError> {
 /// `convergence` name other measurements. Errors point at the value.
 pub fn check_references(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError)> {
     for m in &spec.measures {
-        let at = |k: &str| m.value_spans.get(k).copied().unwrap_or(m.span);
+        let at = |k: &str| m.spans.value_at(k, m.span);
         if let Some(v) = m.params.get("input") {
             let name = as_str(v, "input").map_err(|e| (at("input"), e))?;
             let c = check_input_name(spec, name).map_err(|e| (at("input"), e))?;
@@ -244,7 +244,7 @@ fn known_and_single_of<'a>(
     if let Some(u) = m.params.unknown(known).first() {
         let e = crate::experiment::hooks::ParamError::unknown(u, known);
         return Err((
-            m.param_spans.get(*u).copied().unwrap_or(m.span),
+            m.spans.name_at(u, m.span),
             ApplyError {
                 message: e.message,
                 help: e.help,
@@ -255,7 +255,7 @@ fn known_and_single_of<'a>(
     match m.of.as_slice() {
         [one] => Ok(one.as_str()),
         _ => Err((
-            m.value_spans.get("of").copied().unwrap_or(m.span),
+            m.spans.value_at("of", m.span),
             ApplyError::new(format!(
                 "{} needs of=\"<measurement>\" (one simulated measurement)",
                 m.kind
