@@ -13,8 +13,6 @@ use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
-/// A reference to a file as written, and as resolved against the referring file's directory.
-
 /// Where each property of a node was written: the span of its name and of its
 /// value (diagnostics point at one or the other).
 #[derive(Clone, Debug, PartialEq, Default)]
@@ -46,6 +44,7 @@ impl PropSpans {
     }
 }
 
+/// A reference to a file as written, and as resolved against the referring file's directory.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct FileRef {
     pub written: String,
