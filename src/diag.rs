@@ -162,6 +162,33 @@ impl Error {
 
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
+/// A `serde_json` error in `source` (the text of `path`) as a located
+/// diagnostic: `path:line:col: invalid JSON: …` with the source line and a
+/// caret. serde_json reports a 1-based line and a 1-based byte column; both
+/// are mapped through the text itself (LF or CRLF line ends), clamped, never
+/// panicking. An I/O-level serde error (no position) gets line 1.
+pub fn json_error(path: &Path, source: &str, e: &serde_json::Error) -> Error {
+    let line = e.line().max(1);
+    let offset = source
+        .split_inclusive('\n')
+        .take(line - 1)
+        .map(str::len)
+        .sum::<usize>()
+        + e.column().saturating_sub(1);
+    Error::from(Located::at_offset(
+        path,
+        source,
+        offset.min(source.len()),
+        1,
+        format!("invalid JSON: {e}"),
+    ))
+}
+
+/// Parse `source` (the text of `path`) as JSON; errors located by [`json_error`].
+pub fn parse_json(path: &Path, source: &str) -> Result<serde_json::Value> {
+    serde_json::from_str(source).map_err(|e| json_error(path, source, &e))
+}
+
 /// Write a file atomically: write a sibling temp file, fsync, then rename over `path`.
 /// A reader never sees a half-written file and an interrupted write loses nothing.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
@@ -180,6 +207,24 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn json_errors_point_at_line_and_column() {
+        let p = Path::new("lens.json");
+        for src in [
+            "{\n  \"a\": 1,\n  \"b\": x\n}\n",
+            "{\r\n  \"a\": 1,\r\n  \"b\": x\r\n}\r\n",
+        ] {
+            let e = parse_json(p, src).unwrap_err();
+            let Error::Located(l) = &e else { panic!("{e}") };
+            assert_eq!((l.line, l.col), (3, 8), "{e}");
+            assert!(e.to_string().contains("lens.json:3:8") && l.message.contains("invalid JSON"));
+        }
+        // Truncated input: located at the end, no panic.
+        let e = parse_json(p, "{\"a\": [1, 2").unwrap_err().to_string();
+        assert!(e.starts_with("lens.json:1:"), "{e}");
+        assert!(parse_json(p, "{\"a\": [1, 2]}").is_ok());
+    }
+
     use super::*;
     #[test]
     fn line_col_is_one_based_and_safe() {

@@ -89,4 +89,31 @@ impl SensorImage {
     pub fn channel_at(&self, x: u32, y: u32) -> usize {
         self.cfa.channel_at(self.window.x + x, self.window.y + y)
     }
+    /// A full-frame raw image from stored digital values (e.g. to write a
+    /// synthetic capture with `sensor::output::write_dng`); no labels, no
+    /// electrons, conversion gain 1 DV/e⁻, pixel pitch 1 µm, exposure 0 s.
+    pub fn from_raw_dv(
+        width: u32,
+        height: u32,
+        cfa: &CfaPattern,
+        dv: &[u16],
+        black_level_dv: f64,
+        white_level_dv: f64,
+    ) -> Self {
+        Self {
+            full_width: width,
+            full_height: height,
+            window: crate::optical_image::Rect::new(0, 0, width, height),
+            pixel_pitch_m: 1e-6,
+            cfa: cfa.clone(),
+            dv: dv.iter().map(|&v| v as f32).collect(),
+            electrons: vec![],
+            black_level_dv,
+            white_level_dv,
+            conversion_gain_dv_per_e: 1.0,
+            labels: vec![],
+            label_names: vec![],
+            exposure_s: 0.0,
+        }
+    }
 }

@@ -398,8 +398,7 @@ fn compare_pairs_figures_by_quantity_and_unit() {
         of: vec!["sim".into()],
         params,
         span: Default::default(),
-        param_spans: Default::default(),
-        value_spans: Default::default(),
+        spans: Default::default(),
     };
     // sim = reference + (+3, −4): RMSE = √((9 + 16)/2) = √12.5; a figure only
     // in one of them, or in another unit, is not paired.
@@ -522,8 +521,13 @@ fn dng_capture_is_measured_per_cfa_channel_and_matches_the_png() {
             dv[(y * w + x) as usize] = 64 + plane.get(x as usize, y as usize) as u16;
         }
     }
-    camsim::measure::io::write_dng_cfa(&d.join("chart.dng"), w, h, &dv, &cfa, 64.0, 65535.0)
-        .unwrap();
+    let raw = camsim::image::SensorImage::from_raw_dv(w, h, &cfa, &dv, 64.0, 65535.0);
+    camsim::sensor::output::write_dng(
+        &d.join("chart.dng"),
+        &raw,
+        &camsim::sensor::SensorConfig::generic(),
+    )
+    .unwrap();
     let exp = d.join("dng.kdl");
     std::fs::write(
         &exp,
@@ -542,4 +546,120 @@ fn dng_capture_is_measured_per_cfa_channel_and_matches_the_png() {
     assert_eq!(get(&rows, "compare", "pairs").0, 72.0);
     assert_eq!(get(&rows, "compare", "rmse").0, 0.0);
     assert_eq!(get(&rows, "compare", "slope").0, 1.0);
+}
+
+/// The KDL Cornell box (320×240 film, only the chart's pixels rendered) with
+/// the MCC and the generic sensor; `sensor_extra` goes on the sensor node.
+fn mcc_convergence_run(d: &Path, sensor_extra: &str) -> Vec<(String, String, String, f64, f64)> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let exp = d.join("mccconv.kdl");
+    std::fs::write(
+        &exp,
+        format!(
+            "experiment \"mccconv\" {{\n    scene \"{}\"\n    add \"mcc\" target=\"mcc\"\n    sensor \"{}\" {sensor_extra}\n    render spp=4 max-bounces=2 seed=5\n    measure \"mcc\" of=\"mcc\"\n    measure \"convergence\" of=\"mcc\" spp=(4 16)\n}}\n",
+            root.join("scenes/cornell-box.kdl").display(),
+            root.join("sensors/generic.kdl").display(),
+        ),
+    )
+    .unwrap();
+    let out = d.join("out");
+    let r = camsim(&["run", exp.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+    results(&out.join("mccconv/results.csv"))
+}
+
+/// Every sensor noise source off, so a patch mean's standard error is the
+/// render's alone: Monte Carlo predicts std/√n ∝ spp^(−½), a ratio of 2 per
+/// 4× spp. Measured (seed 5): geometric mean of the 72 patch-channel ratios
+/// 2.03; the log-ratios scatter by ≈0.13 each (each stderr rests on ~12–25
+/// pixels), so their mean is known to ≈0.13/√72 = 0.015. The tolerance
+/// |ln(ratio/2)| < 0.1 is ≈6σ of that and leaves room for the small
+/// deterministic floor that shading across a patch adds.
+#[test]
+fn mcc_patch_stderr_halves_per_4x_spp() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rows = mcc_convergence_run(
+        tmp.path(),
+        "exposure-s=0.5 photon-noise=#false read-noise=#false dark-current=#false dsnu=#false prnu=#false column-fpn=#false quantization=#false",
+    );
+    let mut logs = vec![];
+    for p in 1..=24 {
+        for c in ["r", "g", "b"] {
+            let q = format!("patch{p:02}/{c}_mean");
+            let s4 = get(&rows, "convergence", &format!("{q}/spp4_stderr")).0;
+            let s16 = get(&rows, "convergence", &format!("{q}/spp16_stderr")).0;
+            logs.push((s4 / s16).ln());
+        }
+    }
+    let g = (logs.iter().sum::<f64>() / logs.len() as f64).exp();
+    assert!((g / 2.0).ln().abs() < 0.1, "stderr ratio per 4× spp {g}");
+    assert!(
+        !rows.iter().any(|r| r.1.contains("clipped")),
+        "nothing clips at 0.5 s"
+    );
+}
+
+/// Regression (session 1: "patch stderr falls 3.5–4.8× per 4× spp"): a patch
+/// whose pixels clip at the white level loses its spread as the render noise
+/// falls below the margin to the clip level, so its stderr falls faster than
+/// Monte Carlo (∞× once every pixel clips). Over-exposed 16×, the brightest
+/// patches clip: they are flagged and left out of the fits, the rest are fitted.
+#[test]
+fn convergence_leaves_out_clipped_mcc_patches() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rows = mcc_convergence_run(tmp.path(), "exposure-s=8");
+    let flags = |m: &str, end: &str| -> Vec<String> {
+        rows.iter()
+            .filter(|r| r.0 == m && r.1.ends_with(end))
+            .map(|r| r.1.clone())
+            .collect()
+    };
+    for flag in flags("mcc", "_clipped_fraction") {
+        let (v, se) = get(&rows, "mcc", &flag);
+        assert!(v > 0.0 && v <= 1.0 && se == 0.0, "{flag} {v} {se}");
+    }
+    // The convergence runs have their own seeds, so they may clip other pixels.
+    let left_out = flags("convergence", "/clipped_fraction");
+    assert!(!left_out.is_empty(), "some patches clip at 8 s");
+    for flag in left_out {
+        let q = flag.trim_end_matches("/clipped_fraction");
+        assert!(q.ends_with("_mean"));
+        assert!(get(&rows, "convergence", &flag).0 > 0.0);
+        assert!(
+            !rows.iter().any(|r| r.0 == "convergence"
+                && (r.1 == format!("{q}/efficiency") || r.1 == format!("{q}/spp4_stderr"))),
+            "{q} clips: no fit"
+        );
+    }
+    // Patch 24 (black) is far from the white level and still followed.
+    get(&rows, "convergence", "patch24/g_mean/spp16_stderr");
+}
+
+/// Regression (session 1: the KDL Cornell box with the generic sensor "gave
+/// 0 DV MCC means"): a chart that receives no signal is an error that says
+/// so, with the exposure, instead of 72 figures of 0 DV. At 1 ns the chart
+/// collects ≈1e-8 of its 0.5 s signal (hundreds of DV): far below 1 DV.
+#[test]
+fn dark_mcc_is_an_error_not_zero_dv() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let exp = d.join("dark.kdl");
+    std::fs::write(
+        &exp,
+        format!(
+            "experiment \"dark\" {{\n    scene \"{}\"\n    add \"mcc\" target=\"mcc\"\n    sensor \"{}\" exposure-s=1e-9\n    render spp=1 max-bounces=1\n    measure \"mcc\" of=\"mcc\"\n}}\n",
+            root.join("scenes/cornell-box.kdl").display(),
+            root.join("sensors/generic.kdl").display(),
+        ),
+    )
+    .unwrap();
+    let out = d.join("out");
+    let r = camsim(&["run", exp.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert_eq!(r.status.code(), Some(1), "{}", stderr(&r));
+    let e = stderr(&r);
+    assert!(
+        e.contains("chart 'mcc' is dark") && e.contains("1.000e-9 s") && e.contains("exposure-s"),
+        "{e}"
+    );
 }

@@ -1,7 +1,6 @@
 //! `camsim measure …` on image files.
 
 use camsim::image::CfaPattern;
-use camsim::measure::io::write_dng_cfa;
 use std::process::Command;
 
 fn erfc(x: f64) -> f64 {
@@ -142,7 +141,7 @@ fn measure_sfr_on_png_and_dng() {
         .map(|x| (64.0 + x * 1000.0).round() as u16)
         .collect();
     let dng = dir.path().join("edge.dng");
-    write_dng_cfa(&dng, w as u32, h as u32, &dv, &cfa, 64.0, 1023.0).unwrap();
+    write_raw_dng(&dng, w as u32, h as u32, &dv, &cfa, 1023.0);
     let (code, out, err) = camsim(&["measure", "sfr", dng.to_str().unwrap(), "--channel", "g"]);
     assert_eq!(code, 0, "{err}");
     let m50 = mtf50_of(&out);
@@ -206,7 +205,7 @@ fn measure_mcc_profile_noise_ri_on_a_dng_with_a_label_map() {
         }
     }
     let dng = dir.path().join("chart.dng");
-    write_dng_cfa(&dng, w as u32, h as u32, &dv, &cfa, 64.0, 1023.0).unwrap();
+    write_raw_dng(&dng, w as u32, h as u32, &dv, &cfa, 1023.0);
     let labels = dir.path().join("labels.png");
     write_png16_gray(&labels, w, h, &lab);
     let names = dir.path().join("names.txt");
@@ -276,4 +275,18 @@ fn measure_mcc_profile_noise_ri_on_a_dng_with_a_label_map() {
     ]);
     assert_eq!(code, 3);
     assert!(err.contains("small.png") && err.contains("4×4"), "{err}");
+}
+
+/// A raw capture written by the sensor's own DNG writer (black level 64 DV).
+fn write_raw_dng(
+    path: &std::path::Path,
+    w: u32,
+    h: u32,
+    dv: &[u16],
+    cfa: &camsim::image::CfaPattern,
+    white_dv: f64,
+) {
+    let img = camsim::image::SensorImage::from_raw_dv(w, h, cfa, dv, 64.0, white_dv);
+    camsim::sensor::output::write_dng(path, &img, &camsim::sensor::SensorConfig::generic())
+        .unwrap();
 }

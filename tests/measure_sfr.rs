@@ -355,3 +355,53 @@ fn polynomial_edge_fit_follows_a_curved_edge() {
     // …while the straight fit smears the 1-px sagitta into the ESF.
     assert!((t50 - lin) / t50 > 0.05, "linear {lin} vs {t50}");
 }
+
+/// Regression (session 1: MTF values > 1 on a noisy KDL-scene edge). The
+/// analytic noise floor (`mtf_noise@0.5cy/px`, the RMS of the complex noise
+/// the pixel noise puts on the MTF) must match the scatter of the MTF at
+/// 0.5 cy/px over noise seeds: where the signal dominates, the scatter is the
+/// noise's component along the signal, floor/√2. With 16 seeds the sample sd
+/// has ~18% relative error, so a ratio within 0.6…1.6 is a pass. An edge whose
+/// contrast is too low for its noise is refused, naming the region.
+#[test]
+fn sfr_noise_floor_matches_scatter_and_noisy_edges_are_refused() {
+    use camsim::measure::sfr::{MAX_NOISE_FLOOR, sfr_of_region};
+    use camsim::optical_image::Rect;
+    let clean = edge_image(0.3);
+    let noise_sd = 0.03; // contrast 0.8 → contrast/noise 27
+    let (mut m, mut floors) = (vec![], vec![]);
+    for seed in 0..16 {
+        let mut rng = Rng(5000 + seed);
+        let v: Vec<f64> = clean.iter().map(|x| x + noise_sd * rng.gauss()).collect();
+        let r = sfr(&Plane::new(W, H, v).unwrap(), &SfrOptions::default()).unwrap();
+        m.push(r.mtf_at(0.5).unwrap().0);
+        floors.push(r.noise_floor_nyquist);
+    }
+    let n = m.len() as f64;
+    let mean = m.iter().sum::<f64>() / n;
+    let sd = (m.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    let floor = floors.iter().sum::<f64>() / n;
+    let ratio = sd / (floor / std::f64::consts::SQRT_2);
+    println!("MTF@0.5 {mean:.4} ± {sd:.4} over seeds; noise floor {floor:.4}; ratio {ratio:.3}");
+    assert!(mean > 3.0 * floor, "signal-dominated case");
+    assert!((0.6..1.6).contains(&ratio), "floor not calibrated: {ratio}");
+    // The same edge at 1/20 of the contrast: the noise floor passes the limit.
+    let mut rng = Rng(77);
+    let low: Vec<f64> = clean
+        .iter()
+        .map(|x| 0.5 + (x - 0.5) / 20.0 + noise_sd * rng.gauss())
+        .collect();
+    let plane = Plane::new(W, H, low).unwrap();
+    let e = sfr_of_region(
+        &plane,
+        Rect::new(0, 0, W as u32, H as u32),
+        &SfrOptions::default(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("SFR region (x 0 y 0 w 128 h 96)") && e.contains("too low for its noise"),
+        "{e}"
+    );
+    assert!(e.contains(&format!("limit {MAX_NOISE_FLOOR}")), "{e}");
+}

@@ -384,8 +384,7 @@ pub fn apply(
                         object: obj.to_string(),
                         params: Default::default(),
                         span: Default::default(),
-                        param_spans: Default::default(),
-                        value_spans: Default::default(),
+                        spans: Default::default(),
                     };
                     o.params.set(*key, v.clone());
                     spec.overrides.push(o);

@@ -29,7 +29,10 @@
 //!   `reference-spp` (rendered with the variant's seed) — the error against
 //!   that reference ([`crate::measure::convergence`]). Sensor measurements keep
 //!   the sensor's noise, which puts a floor under their standard error; the
-//!   optical-image measurement `ri` shows the pure Monte Carlo error.
+//!   optical-image measurement `ri` shows the pure Monte Carlo error. MCC
+//!   patch means with clipped pixels in any run are not fitted (their
+//!   standard error collapses with the noise, not as t^(−½)); they get a
+//!   `<q>/clipped_fraction` figure instead.
 
 use super::apply::{ApplyError, as_int, as_str, describe};
 use super::source::Span;
@@ -103,8 +106,7 @@ pub fn roi_px(v: &Value) -> Result<Rect, ApplyError> {
 /// `convergence` name other measurements. Errors point at the value.
 pub fn check_references(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError)> {
     for m in &spec.measures {
-        let at = |k: &str| m.value_spans.get(k).copied().unwrap_or(m.span);
-        let name_at = |k: &str| m.param_spans.get(k).copied().unwrap_or(m.span);
+        let at = |k: &str| m.spans.value_at(k, m.span);
         if let Some(v) = m.params.get("input") {
             let name = as_str(v, "input").map_err(|e| (at("input"), e))?;
             let c = check_input_name(spec, name).map_err(|e| (at("input"), e))?;
@@ -155,30 +157,11 @@ pub fn check_references(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyErr
         }
         match m.kind.as_str() {
             "compare" => {
-                const KNOWN: &[&str] = &["reference", "quantity", "normalize"];
-                if let Some(u) = m.params.unknown(KNOWN).first() {
-                    let e = crate::experiment::hooks::ParamError::unknown(u, KNOWN);
-                    return Err((
-                        name_at(u),
-                        ApplyError {
-                            message: e.message,
-                            help: e.help,
-                            on_path: false,
-                        },
-                    ));
-                }
-                let of = match m.of.as_slice() {
-                    [one] => one.as_str(),
-                    _ => {
-                        return Err((
-                            at("of"),
-                            ApplyError::new(
-                                "compare needs of=\"<measurement>\" (one simulated measurement)",
-                            )
-                            .help("e.g. measure \"compare\" of=\"mcc\" reference=\"mcc-measured\""),
-                        ));
-                    }
-                };
+                let of = known_and_single_of(
+                    m,
+                    &["reference", "quantity", "normalize"],
+                    "e.g. measure \"compare\" of=\"mcc\" reference=\"mcc-measured\"",
+                )?;
                 check_measurement_ref(spec, m, of).map_err(|e| (at("of"), e))?;
                 let r = match m.params.get("reference") {
                     Some(v) => as_str(v, "reference").map_err(|e| (at("reference"), e))?,
@@ -213,28 +196,11 @@ pub fn check_references(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyErr
                 }
             }
             "convergence" => {
-                const KNOWN: &[&str] = &["spp", "reference-spp", "quantity"];
-                if let Some(u) = m.params.unknown(KNOWN).first() {
-                    let e = crate::experiment::hooks::ParamError::unknown(u, KNOWN);
-                    return Err((
-                        name_at(u),
-                        ApplyError {
-                            message: e.message,
-                            help: e.help,
-                            on_path: false,
-                        },
-                    ));
-                }
-                let of = match m.of.as_slice() {
-                    [one] => one.as_str(),
-                    _ => {
-                        return Err((
-                            at("of"),
-                            ApplyError::new("convergence needs of=\"<measurement>\" (one simulated measurement)")
-                                .help("e.g. measure \"convergence\" of=\"sfr\" spp=(16 64 256)"),
-                        ));
-                    }
-                };
+                let of = known_and_single_of(
+                    m,
+                    &["spp", "reference-spp", "quantity"],
+                    "e.g. measure \"convergence\" of=\"sfr\" spp=(16 64 256)",
+                )?;
                 let t = check_measurement_ref(spec, m, of).map_err(|e| (at("of"), e))?;
                 if !CONVERGENCE_KINDS.contains(&t.kind.as_str()) || t.params.get("input").is_some()
                 {
@@ -265,6 +231,38 @@ pub fn check_references(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyErr
         }
     }
     Ok(())
+}
+
+/// The checks `compare` and `convergence` share: only the `known` properties
+/// (an unknown one is reported at its name, with a did-you-mean), and exactly
+/// one `of=` measurement, which is returned.
+fn known_and_single_of<'a>(
+    m: &'a Measure,
+    known: &[&str],
+    example: &str,
+) -> Result<&'a str, (Span, ApplyError)> {
+    if let Some(u) = m.params.unknown(known).first() {
+        let e = crate::experiment::hooks::ParamError::unknown(u, known);
+        return Err((
+            m.spans.name_at(u, m.span),
+            ApplyError {
+                message: e.message,
+                help: e.help,
+                on_path: false,
+            },
+        ));
+    }
+    match m.of.as_slice() {
+        [one] => Ok(one.as_str()),
+        _ => Err((
+            m.spans.value_at("of", m.span),
+            ApplyError::new(format!(
+                "{} needs of=\"<measurement>\" (one simulated measurement)",
+                m.kind
+            ))
+            .help(example),
+        )),
+    }
 }
 
 /// Another measurement of the experiment named `name` (not `m`, not a compare/convergence).
@@ -638,9 +636,28 @@ pub fn convergence(m: &Measure, spec: &ResolvedExperiment) -> Result<Measured> {
         ));
     }
     let matches = |q: &str| filter.is_none_or(|f| q.contains(f));
-    let mut followed = 0;
+    let (mut followed, mut clipped_out) = (0, 0);
     for f0 in runs[0].1.0.iter().filter(|f| matches(&f.quantity)) {
         let q = &f0.quantity;
+        // A figure of clipped pixels (an MCC patch at the white level) does not
+        // follow Monte Carlo noise: report how much clipped, fit nothing.
+        let clipped = crate::measure::mcc::clipped_flag(q).map_or(0.0, |flag| {
+            runs.iter()
+                .flat_map(|(_, (figs, _))| figs.iter().filter(|f| f.quantity == flag))
+                .map(|f| f.value)
+                .fold(0.0, f64::max)
+        });
+        if clipped > 0.0 {
+            out.figures.push(Figure::new(
+                &m.name,
+                format!("{q}/clipped_fraction"),
+                "1",
+                clipped,
+                0.0,
+            ));
+            clipped_out += 1;
+            continue;
+        }
         let (spp_of, series): (Vec<u64>, Vec<crate::measure::convergence::Run>) = runs
             .iter()
             .filter_map(|(spp, (figs, dt))| {
@@ -688,11 +705,18 @@ pub fn convergence(m: &Measure, spec: &ResolvedExperiment) -> Result<Measured> {
     }
     if followed == 0 {
         return Err(Error::invalid(format!(
-            "convergence '{}': no figure of '{of}'{} has a standard error in ≥ 2 runs",
+            "convergence '{}': no figure of '{of}'{} has a standard error in ≥ 2 runs{}",
             m.name,
             filter
                 .map(|q| format!(" matching quantity=\"{q}\""))
-                .unwrap_or_default()
+                .unwrap_or_default(),
+            if clipped_out > 0 {
+                format!(
+                    " ({clipped_out} left out because their pixels clip at the sensor's white level or floor; shorten the exposure)"
+                )
+            } else {
+                String::new()
+            }
         )));
     }
     Ok(out)

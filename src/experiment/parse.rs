@@ -101,11 +101,8 @@ pub fn parse_source(path: &Path, text: String, loader: Loader) -> Result<Parsed,
 
 /// Run the registered section validators (see [`hooks`]) on a resolved spec.
 pub fn validate_hooks(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError)> {
-    let to_err = |e: hooks::ParamError,
-                  names: &BTreeMap<String, Span>,
-                  values: &BTreeMap<String, Span>,
-                  whole: Span| {
-        let spans = if e.on_value { values } else { names };
+    let to_err = |e: hooks::ParamError, ps: &super::spec::PropSpans, whole: Span| {
+        let spans = if e.on_value { &ps.values } else { &ps.names };
         let span = e
             .name
             .as_ref()
@@ -124,12 +121,12 @@ pub fn validate_hooks(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError
     for (key, sec) in [("sensor", &spec.sensor), ("lens", &spec.lens)] {
         if let (Some(s), Some(v)) = (sec, hooks::validator(key)) {
             v(s.file.as_ref().map(|f| f.path.as_path()), &s.overrides)
-                .map_err(|e| to_err(e, &s.param_spans, &s.value_spans, s.span))?;
+                .map_err(|e| to_err(e, &s.spans, s.span))?;
         }
     }
     for m in &spec.measures {
         if let Some(v) = hooks::validator(&format!("measure:{}", m.kind)) {
-            v(None, &m.params).map_err(|e| to_err(e, &m.param_spans, &m.value_spans, m.span))?;
+            v(None, &m.params).map_err(|e| to_err(e, &m.spans, m.span))?;
         }
     }
     for a in &spec.additions {
@@ -140,12 +137,12 @@ pub fn validate_hooks(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError
         };
         if let Some(v) = hooks::validator(key) {
             v(a.file.as_ref().map(|f| f.path.as_path()), &a.params)
-                .map_err(|e| to_err(e, &a.param_spans, &a.value_spans, a.span))?;
+                .map_err(|e| to_err(e, &a.spans, a.span))?;
         }
     }
     if let Some(v) = hooks::validator("override") {
         for o in &spec.overrides {
-            v(None, &o.params).map_err(|e| to_err(e, &o.param_spans, &o.value_spans, o.span))?;
+            v(None, &o.params).map_err(|e| to_err(e, &o.spans, o.span))?;
         }
     }
     Ok(())
@@ -644,8 +641,7 @@ impl P {
                     let ents = self.entries(file, n)?;
                     let mut object = None;
                     let mut params = Params::new();
-                    let mut spans = BTreeMap::new();
-                    let mut vspans = BTreeMap::new();
+                    let mut spans = super::spec::PropSpans::default();
                     for e in ents {
                         match e.name {
                             None => {
@@ -666,8 +662,7 @@ impl P {
                             Some((k, ks)) => {
                                 apply::check_generic(&k, &e.value).map_err(|x| self.ae(ks, x))?;
                                 params.set(k.clone(), e.value);
-                                vspans.insert(k.clone(), e.vspan);
-                                spans.insert(k, ks);
+                                spans.insert(&k, ks, e.vspan);
                             }
                         }
                     }
@@ -688,8 +683,7 @@ impl P {
                                 .with_help(format!("first at {}", self.where_(o.span))));
                         }
                         o.params.0.extend(params.0);
-                        o.param_spans.extend(spans);
-                        o.value_spans.extend(vspans);
+                        o.spans.extend(spans);
                         o.span = sp;
                     } else {
                         override_at.insert(object.clone(), spec.overrides.len());
@@ -697,8 +691,7 @@ impl P {
                             object,
                             params,
                             span: sp,
-                            param_spans: spans,
-                            value_spans: vspans,
+                            spans,
                         });
                     }
                 }
@@ -972,8 +965,7 @@ impl P {
             scale: [1.0; 3],
             params: Params::new(),
             span: sp,
-            param_spans: BTreeMap::new(),
-            value_spans: BTreeMap::new(),
+            spans: Default::default(),
         };
         let mut target = None;
         for e in ents {
@@ -1041,8 +1033,7 @@ impl P {
                         _ => {
                             apply::check_generic(k, &e.value).map_err(|x| self.ae(*ks, x))?;
                             a.params.set(k.clone(), e.value.clone());
-                            a.param_spans.insert(k.clone(), *ks);
-                            a.value_spans.insert(k.clone(), e.vspan);
+                            a.spans.insert(k, *ks, e.vspan);
                             Ok(())
                         }
                     };
@@ -1123,13 +1114,11 @@ impl P {
             // A new definition file replaces the base's file and its overrides.
             s.file = Some(f);
             s.overrides = Params::new();
-            s.param_spans.clear();
-            s.value_spans.clear();
+            s.spans.clear();
         }
         for (k, ks, vs, v) in params {
             s.overrides.set(k.clone(), v);
-            s.value_spans.insert(k.clone(), vs);
-            s.param_spans.insert(k, ks);
+            s.spans.insert(&k, ks, vs);
         }
         if s.file.is_none() && s.overrides.0.is_empty() {
             return Err(self.e(sp, format!("'{sec}' is empty")).with_help(format!(
@@ -1149,8 +1138,7 @@ impl P {
             of: vec![],
             params: Params::new(),
             span: sp,
-            param_spans: BTreeMap::new(),
-            value_spans: BTreeMap::new(),
+            spans: Default::default(),
         };
         let mut name = None;
         for e in ents {
@@ -1195,13 +1183,12 @@ impl P {
                     "of" => {
                         let s = apply::as_str(&e.value, "of").map_err(|x| self.ae(e.vspan, x))?;
                         m.of.insert(0, s.to_string());
-                        m.value_spans.insert("of".into(), e.vspan);
+                        m.spans.values.insert("of".into(), e.vspan);
                     }
                     _ => {
                         apply::check_generic(k, &e.value).map_err(|x| self.ae(*ks, x))?;
                         m.params.set(k.clone(), e.value.clone());
-                        m.param_spans.insert(k.clone(), *ks);
-                        m.value_spans.insert(k.clone(), e.vspan);
+                        m.spans.insert(k, *ks, e.vspan);
                     }
                 },
             }

@@ -13,6 +13,37 @@ use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
+/// Where each property of a node was written: the span of its name and of its
+/// value (diagnostics point at one or the other).
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct PropSpans {
+    pub names: BTreeMap<String, Span>,
+    pub values: BTreeMap<String, Span>,
+}
+
+impl PropSpans {
+    pub fn insert(&mut self, key: &str, name: Span, value: Span) {
+        self.names.insert(key.to_string(), name);
+        self.values.insert(key.to_string(), value);
+    }
+    pub fn extend(&mut self, other: PropSpans) {
+        self.names.extend(other.names);
+        self.values.extend(other.values);
+    }
+    pub fn clear(&mut self) {
+        self.names.clear();
+        self.values.clear();
+    }
+    /// The span of property `key`'s name, else `whole`.
+    pub fn name_at(&self, key: &str, whole: Span) -> Span {
+        self.names.get(key).copied().unwrap_or(whole)
+    }
+    /// The span of property `key`'s value, else `whole`.
+    pub fn value_at(&self, key: &str, whole: Span) -> Span {
+        self.values.get(key).copied().unwrap_or(whole)
+    }
+}
+
 /// A reference to a file as written, and as resolved against the referring file's directory.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct FileRef {
@@ -62,12 +93,9 @@ pub struct Addition {
     pub params: Params,
     #[serde(skip)]
     pub span: Span,
-    /// Spans of the property names.
+    /// Spans of the property names and values.
     #[serde(skip)]
-    pub param_spans: BTreeMap<String, Span>,
-    /// Spans of the property values.
-    #[serde(skip)]
-    pub value_spans: BTreeMap<String, Span>,
+    pub spans: PropSpans,
 }
 
 /// Changes to an object of the base scene (`override "wall-left" reflectance="cbox-red-wall"`).
@@ -77,12 +105,9 @@ pub struct Override {
     pub params: Params,
     #[serde(skip)]
     pub span: Span,
-    /// Spans of the property names.
+    /// Spans of the property names and values.
     #[serde(skip)]
-    pub param_spans: BTreeMap<String, Span>,
-    /// Spans of the property values.
-    #[serde(skip)]
-    pub value_spans: BTreeMap<String, Span>,
+    pub spans: PropSpans,
 }
 
 /// Camera pose in scene coordinates (metres).
@@ -104,12 +129,9 @@ pub struct ConfigSection {
     pub overrides: Params,
     #[serde(skip)]
     pub span: Span,
-    /// Spans of the property names.
+    /// Spans of the property names and values.
     #[serde(skip)]
-    pub param_spans: BTreeMap<String, Span>,
-    /// Spans of the property values.
-    #[serde(skip)]
-    pub value_spans: BTreeMap<String, Span>,
+    pub spans: PropSpans,
 }
 
 /// Render settings.
@@ -148,12 +170,9 @@ pub struct Measure {
     pub params: Params,
     #[serde(skip)]
     pub span: Span,
-    /// Spans of the property names.
+    /// Spans of the property names and values.
     #[serde(skip)]
-    pub param_spans: BTreeMap<String, Span>,
-    /// Spans of the property values.
-    #[serde(skip)]
-    pub value_spans: BTreeMap<String, Span>,
+    pub spans: PropSpans,
 }
 
 /// A captured image named by the experiment (`measured "capture-near"

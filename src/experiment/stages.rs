@@ -618,7 +618,10 @@ pub fn measure(
                             })?,
                     ),
                 };
-                let (sfr, roi) = crate::measure::sfr::sfr_of_region(&plane, roi, &opts)?;
+                let (sfr, roi) =
+                    crate::measure::sfr::sfr_of_region(&plane, roi, &opts).map_err(|e| {
+                        Error::invalid(format!("measurement '{}', edge '{obj}': {e}", m.name))
+                    })?;
                 let r = prefixed(sfr.measured(&m.name, roi), obj);
                 out.figures.extend(r.figures);
                 out.curves.extend(r.curves);

@@ -440,82 +440,6 @@ fn read_tiff(path: &Path, b: &[u8]) -> Result<LoadedImage> {
     })
 }
 
-/// Write a minimal uncompressed little-endian DNG holding a 16-bit CFA
-/// mosaic (one strip) with `CFARepeatPatternDim`, `CFAPattern`, `BlackLevel`
-/// and `WhiteLevel`: a reference writer for tests and for exporting
-/// simulated raw images that the reader above (and dcraw-like tools) read.
-pub fn write_dng_cfa(
-    path: &Path,
-    w: u32,
-    h: u32,
-    dv: &[u16],
-    cfa: &CfaPattern,
-    black: f64,
-    white: f64,
-) -> Result<()> {
-    if dv.len() != (w * h) as usize {
-        return Err(Error::invalid(
-            "DNG writer: data size does not match width×height",
-        ));
-    }
-    let mut entries: Vec<(u16, u16, u32, Vec<u8>)> = vec![];
-    let short = |v: &[u16]| v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
-    let long = |v: &[u32]| v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
-    let data_len = dv.len() as u32 * 2;
-    entries.push((254, 4, 1, long(&[0])));
-    entries.push((256, 4, 1, long(&[w])));
-    entries.push((257, 4, 1, long(&[h])));
-    entries.push((258, 3, 1, short(&[16])));
-    entries.push((259, 3, 1, short(&[1])));
-    entries.push((262, 3, 1, short(&[32803])));
-    entries.push((273, 4, 1, long(&[0]))); // patched below
-    entries.push((277, 3, 1, short(&[1])));
-    entries.push((278, 4, 1, long(&[h])));
-    entries.push((279, 4, 1, long(&[data_len])));
-    entries.push((33421, 3, 2, short(&[cfa.height as u16, cfa.width as u16])));
-    entries.push((33422, 1, cfa.cells.len() as u32, cfa.cells.clone()));
-    entries.push((50706, 1, 4, vec![1, 4, 0, 0]));
-    entries.push((50714, 4, 1, long(&[black.round().max(0.0) as u32])));
-    entries.push((50717, 4, 1, long(&[white.round().max(0.0) as u32])));
-    let ifd_off = 8u32;
-    let ifd_len = 2 + 12 * entries.len() as u32 + 4;
-    let mut extra = vec![];
-    let extra_off = ifd_off + ifd_len;
-    let mut ifd = (entries.len() as u16).to_le_bytes().to_vec();
-    let mut fixed = vec![];
-    for (tag, typ, count, val) in &entries {
-        let mut v = val.clone();
-        if v.len() > 4 {
-            let o = extra_off + extra.len() as u32;
-            extra.extend_from_slice(&v);
-            if extra.len() % 2 == 1 {
-                extra.push(0);
-            }
-            v = o.to_le_bytes().to_vec();
-        }
-        v.resize(4, 0);
-        fixed.push((*tag, *typ, *count, v));
-    }
-    let data_off = extra_off + extra.len() as u32;
-    for (tag, typ, count, v) in fixed {
-        ifd.extend_from_slice(&tag.to_le_bytes());
-        ifd.extend_from_slice(&typ.to_le_bytes());
-        ifd.extend_from_slice(&count.to_le_bytes());
-        ifd.extend_from_slice(&if tag == 273 {
-            data_off.to_le_bytes().to_vec()
-        } else {
-            v
-        });
-    }
-    ifd.extend_from_slice(&0u32.to_le_bytes());
-    let mut out = b"II*\0".to_vec();
-    out.extend_from_slice(&ifd_off.to_le_bytes());
-    out.extend_from_slice(&ifd);
-    out.extend_from_slice(&extra);
-    out.extend_from_slice(&short(dv));
-    crate::diag::write_atomic(path, &out)
-}
-
 /// Object labels for a captured image: a grey PNG whose value k > 0 marks
 /// object k and a text file whose k-th line (1-based) names it; value 0 is
 /// "no object". Returns per-pixel label ids (k − 1, or `scene::NO_OBJECT`) and names.
@@ -565,7 +489,9 @@ mod tests {
         let p = dir.path().join("x.dng");
         let cfa = CfaPattern::bayer("grbg").unwrap();
         let dv: Vec<u16> = (0..6 * 4).map(|i| 64 + i as u16).collect();
-        write_dng_cfa(&p, 6, 4, &dv, &cfa, 64.0, 1023.0).unwrap();
+        let img = crate::image::SensorImage::from_raw_dv(6, 4, &cfa, &dv, 64.0, 1023.0);
+        crate::sensor::output::write_dng(&p, &img, &crate::sensor::SensorConfig::generic())
+            .unwrap();
         let im = read_image(&p).unwrap();
         let m = im.mosaic.as_ref().unwrap();
         assert_eq!(

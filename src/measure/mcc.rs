@@ -8,6 +8,14 @@
 //! edges, blur and the chart's black gaps stay out. Per channel the mean over
 //! the kept pixels is reported with standard error std/√n (pixel noise and
 //! render noise, assumed independent between pixels).
+//!
+//! **Clipped pixels.** A pixel at the ADC's white level (or at its floor) no
+//! longer follows the light: the patch mean is biased and std/√n measures the
+//! clipping, not the noise — it collapses as the noise falls below the margin
+//! to the clip level (a 4× spp step then shrinks it 4–∞× instead of 2×). With
+//! the clip range known (sensor images), every patch channel with clipped
+//! pixels gets a figure `patchNN/<ch>_clipped_fraction`, and `convergence`
+//! leaves such figures out of its fits ([`clipped_flag`]).
 
 use super::plane::ChannelView;
 use super::stats::{mean, std_dev};
@@ -26,6 +34,17 @@ pub struct Patch {
     pub pixels: usize,
     /// (channel, mean, stderr) per channel.
     pub means: Vec<(String, f64, f64)>,
+    /// Fraction of the kept pixels at or beyond the clip range, per channel
+    /// (parallel to `means`; all 0 when the range is unknown).
+    pub clipped: Vec<f64>,
+}
+
+/// The quantity that flags `quantity` (a `patchNN/<ch>_mean`) as clipped:
+/// `patchNN/<ch>_clipped_fraction`.
+pub fn clipped_flag(quantity: &str) -> Option<String> {
+    quantity
+        .strip_suffix("_mean")
+        .map(|s| format!("{s}_clipped_fraction"))
 }
 
 /// Patch labels of `chart`: (patch number, label id), sorted by number.
@@ -63,6 +82,19 @@ pub fn patch_means(
     label_names: &[String],
     chart: &str,
     erode_fraction: f64,
+) -> Result<Vec<Patch>> {
+    patch_means_clipped(views, labels, label_names, chart, erode_fraction, None)
+}
+
+/// [`patch_means`], counting the pixels outside the unclipped range
+/// `(low, high)` (values ≤ low or ≥ high are clipped).
+pub fn patch_means_clipped(
+    views: &[ChannelView],
+    labels: &[u32],
+    label_names: &[String],
+    chart: &str,
+    erode_fraction: f64,
+    clip: Option<(f64, f64)>,
 ) -> Result<Vec<Patch>> {
     let plane = views
         .first()
@@ -127,6 +159,7 @@ pub fn patch_means(
             kept.iter().map(|p| p.1).max().unwrap_or(0),
         );
         let mut means = vec![];
+        let mut clipped = vec![];
         for v in views {
             let vals: Vec<f64> = kept.iter().filter_map(|&(x, y)| v.value(x, y)).collect();
             if vals.len() < 2 {
@@ -140,6 +173,10 @@ pub fn patch_means(
                 mean(&vals),
                 std_dev(&vals) / (vals.len() as f64).sqrt(),
             ));
+            let n_clipped = clip.map_or(0, |(lo, hi)| {
+                vals.iter().filter(|&&x| x <= lo || x >= hi).count()
+            });
+            clipped.push(n_clipped as f64 / vals.len() as f64);
         }
         out.push(Patch {
             number: num,
@@ -152,6 +189,7 @@ pub fn patch_means(
             ),
             pixels: kept.len(),
             means,
+            clipped,
         });
     }
     Ok(out)
@@ -165,21 +203,60 @@ pub fn patch_means_of_sensor(
 ) -> Result<Vec<Patch>> {
     let plane = super::plane::Plane::from_sensor(img)?;
     let views = super::plane::channel_views(&plane, "y");
-    patch_means(&views, &img.labels, &img.label_names, chart, erode_fraction)
+    // DV 0 and the white level are the ADC's clip levels (black subtracted here).
+    let clip = (-img.black_level_dv, img.white_level_dv - img.black_level_dv);
+    let patches = patch_means_clipped(
+        &views,
+        &img.labels,
+        &img.label_names,
+        chart,
+        erode_fraction,
+        Some(clip),
+    )?;
+    check_not_dark(&patches, chart, img.exposure_s)?;
+    Ok(patches)
 }
 
-/// Figures `patchNN/<ch>_mean` (DV) and one curve per channel (mean vs patch number).
+/// Refuse a chart with no signal: when no patch channel's mean rises above
+/// 1 DV and 3 standard errors, the figures would be 0 DV of noise. Says what
+/// to check instead (session 1 met "0 DV MCC means" without a word).
+pub fn check_not_dark(patches: &[Patch], chart: &str, exposure_s: f64) -> Result<()> {
+    let brightest = patches
+        .iter()
+        .flat_map(|p| p.means.iter().map(move |m| (p, m)))
+        .max_by(|a, b| a.1.1.total_cmp(&b.1.1));
+    let Some((p, (c, v, se))) = brightest else {
+        return Ok(());
+    };
+    let lit = patches
+        .iter()
+        .flat_map(|p| &p.means)
+        .any(|(_, v, se)| *v > 1.0 && *v > 3.0 * se);
+    if lit {
+        return Ok(());
+    }
+    Err(Error::invalid(format!(
+        "chart '{chart}' is dark: its brightest patch ({}, channel {c}) reads {v:.3} ± {se:.3} DV above black at an exposure of {exposure_s:.3e} s; \
+         no patch rises above 1 DV and its noise. Expose longer (sensor exposure-s=…), check the light's emission units (radiance in W/(sr·m²·nm)) \
+         and that the chart faces the camera and is lit",
+        p.name
+    )))
+}
+
+/// Figures `patchNN/<ch>_mean` (DV), `patchNN/<ch>_clipped_fraction` where
+/// pixels are clipped, and one curve per channel (mean vs patch number).
 pub fn measured(patches: &[Patch], measurement: &str) -> Measured {
     let mut m = Measured::default();
     for p in patches {
-        for (c, v, se) in &p.means {
-            m.figures.push(Figure::new(
-                measurement,
-                format!("patch{:02}/{c}_mean", p.number),
-                "DV",
-                *v,
-                *se,
-            ));
+        for (i, (c, v, se)) in p.means.iter().enumerate() {
+            let q = format!("patch{:02}/{c}_mean", p.number);
+            let clipped = p.clipped.get(i).copied().unwrap_or(0.0);
+            let flag = clipped_flag(&q).filter(|_| clipped > 0.0);
+            m.figures.push(Figure::new(measurement, q, "DV", *v, *se));
+            if let Some(f) = flag {
+                m.figures
+                    .push(Figure::new(measurement, f, "1", clipped, 0.0));
+            }
         }
         m.pixels_read.push(p.rect);
     }

@@ -11,7 +11,6 @@
 use super::model::Mesh;
 use crate::{Error, Result};
 use glam::{Mat4, Vec3};
-use std::io::BufRead;
 use std::path::Path;
 
 /// A loaded mesh and the notes made while loading it.
@@ -213,6 +212,58 @@ fn load_gltf(path: &Path) -> Result<Raw> {
 }
 
 // ---------------------------------------------------------------- PLY
+//
+// The one PLY reader of camsim (mesh files and pbrt's `plymesh`): ASCII and
+// binary (little / big endian); vertex `x y z`, optional `nx ny nz` and
+// `u v` (or `s t`, `texture_u texture_v`, `texture_s texture_t`); faces as
+// `vertex_indices` (or `vertex_index`) lists, split into a triangle fan.
+// Other elements and properties are read past and ignored.
+
+/// A PLY mesh as stored in the file (object space, f64 positions).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PlyMesh {
+    pub positions: Vec<glam::DVec3>,
+    /// Present when every vertex has `nx ny nz`.
+    pub normals: Option<Vec<glam::DVec3>>,
+    /// Present when every vertex has texture coordinates.
+    pub uvs: Option<Vec<glam::Vec2>>,
+    pub triangles: Vec<[u32; 3]>,
+}
+
+/// A PLY problem: the 1-based header line when it is in the header.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlyError {
+    pub line: Option<usize>,
+    pub message: String,
+}
+
+impl PlyError {
+    fn header(line: usize, message: impl Into<String>) -> Self {
+        Self {
+            line: Some(line),
+            message: message.into(),
+        }
+    }
+    fn data(message: impl Into<String>) -> Self {
+        Self {
+            line: None,
+            message: message.into(),
+        }
+    }
+    /// `path:line: PLY: …` (header) or `path: PLY data: …`.
+    pub fn located(&self, path: &Path) -> String {
+        match self.line {
+            Some(l) => format!("{}:{l}: PLY: {}", path.display(), self.message),
+            None => format!("{}: PLY data: {}", path.display(), self.message),
+        }
+    }
+}
+
+/// Read a PLY file; errors name the file (and the header line).
+pub fn read_ply(path: &Path) -> Result<PlyMesh> {
+    let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    parse_ply(&data).map_err(|e| Error::invalid(e.located(path)))
+}
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Scalar {
@@ -270,105 +321,99 @@ enum Format {
     Be,
 }
 
-/// Reads PLY values either from ASCII tokens or binary bytes.
-struct PlyReader<R: BufRead> {
-    r: R,
+/// Reads PLY values from the body, as ASCII words or binary scalars.
+struct Body<'a> {
+    data: &'a [u8],
+    pos: usize,
     format: Format,
-    tokens: std::vec::IntoIter<String>,
 }
 
-impl<R: BufRead> PlyReader<R> {
+impl Body<'_> {
     fn value(&mut self, t: Scalar) -> std::result::Result<f64, String> {
-        match self.format {
-            Format::Ascii => loop {
-                if let Some(tok) = self.tokens.next() {
-                    return tok
-                        .parse::<f64>()
-                        .map_err(|_| format!("bad number '{tok}'"));
-                }
-                let mut line = String::new();
-                if self.r.read_line(&mut line).map_err(|e| e.to_string())? == 0 {
-                    return Err("unexpected end of file".into());
-                }
-                self.tokens = line
-                    .split_whitespace()
-                    .map(str::to_string)
-                    .collect::<Vec<_>>()
-                    .into_iter();
-            },
-            _ => {
-                let mut b = [0u8; 8];
-                let n = t.size();
-                self.r
-                    .read_exact(&mut b[..n])
-                    .map_err(|_| "unexpected end of file".to_string())?;
-                let le = self.format == Format::Le;
-                macro_rules! rd {
-                    ($ty:ty, $n:expr) => {{
-                        let a: [u8; $n] = b[..$n].try_into().unwrap();
-                        (if le {
-                            <$ty>::from_le_bytes(a)
-                        } else {
-                            <$ty>::from_be_bytes(a)
-                        }) as f64
-                    }};
-                }
-                Ok(match t {
-                    Scalar::I8 => b[0] as i8 as f64,
-                    Scalar::U8 => b[0] as f64,
-                    Scalar::I16 => rd!(i16, 2),
-                    Scalar::U16 => rd!(u16, 2),
-                    Scalar::I32 => rd!(i32, 4),
-                    Scalar::U32 => rd!(u32, 4),
-                    Scalar::F32 => rd!(f32, 4),
-                    Scalar::F64 => rd!(f64, 8),
-                })
+        if self.format == Format::Ascii {
+            let d = self.data;
+            while self.pos < d.len() && d[self.pos].is_ascii_whitespace() {
+                self.pos += 1;
             }
+            let s = self.pos;
+            while self.pos < d.len() && !d[self.pos].is_ascii_whitespace() {
+                self.pos += 1;
+            }
+            if s == self.pos {
+                return Err("unexpected end of file".into());
+            }
+            let w = String::from_utf8_lossy(&d[s..self.pos]);
+            return w.parse::<f64>().map_err(|_| format!("bad number '{w}'"));
         }
+        let n = t.size();
+        if self.pos + n > self.data.len() {
+            return Err("unexpected end of file".into());
+        }
+        let mut b = [0u8; 8];
+        b[..n].copy_from_slice(&self.data[self.pos..self.pos + n]);
+        self.pos += n;
+        if self.format == Format::Be {
+            b[..n].reverse();
+        }
+        Ok(match t {
+            Scalar::I8 => b[0] as i8 as f64,
+            Scalar::U8 => b[0] as f64,
+            Scalar::I16 => i16::from_le_bytes([b[0], b[1]]) as f64,
+            Scalar::U16 => u16::from_le_bytes([b[0], b[1]]) as f64,
+            Scalar::I32 => i32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64,
+            Scalar::U32 => u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64,
+            Scalar::F32 => f32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64,
+            Scalar::F64 => f64::from_le_bytes(b),
+        })
     }
 }
 
-fn load_ply(path: &Path) -> Result<Raw> {
-    let f = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    let mut r = std::io::BufReader::new(f);
-    let err =
-        |line: usize, m: String| Error::invalid(format!("{}:{line}: PLY: {m}", path.display()));
-    let mut line_no = 0usize;
-    let mut next_line = |r: &mut std::io::BufReader<std::fs::File>| -> Result<String> {
-        let mut s = String::new();
-        let n = r.read_line(&mut s).map_err(|e| Error::io(path, e))?;
-        line_no += 1;
-        if n == 0 {
-            return Err(Error::invalid(format!(
-                "{}: PLY header ends before 'end_header'",
-                path.display()
-            )));
+/// Parse the header: (format, elements, byte offset of the body).
+fn ply_header(data: &[u8]) -> std::result::Result<(Format, Vec<Element>, usize), PlyError> {
+    let mut pos = 0usize;
+    let mut read = 0usize;
+    let mut next_line = || -> std::result::Result<String, PlyError> {
+        if pos >= data.len() {
+            return Err(PlyError::header(
+                read + 1,
+                "header ends before 'end_header'",
+            ));
         }
-        Ok(s.trim_end_matches(['\n', '\r']).to_string())
+        let end = data[pos..]
+            .iter()
+            .position(|&c| c == b'\n')
+            .map_or(data.len(), |k| pos + k);
+        let l = String::from_utf8_lossy(&data[pos..end])
+            .trim_end_matches('\r')
+            .to_string();
+        pos = end + 1;
+        read += 1;
+        Ok(l)
     };
-    if next_line(&mut r)?.trim() != "ply" {
-        return Err(err(1, "file does not start with 'ply'".into()));
+    if next_line()?.trim() != "ply" {
+        return Err(PlyError::header(1, "file does not start with 'ply'"));
     }
     let mut format = None;
     let mut elements: Vec<Element> = Vec::new();
     let mut ln = 1;
     loop {
-        let l = next_line(&mut r)?;
+        let l = next_line()?;
         ln += 1;
         let w: Vec<&str> = l.split_whitespace().collect();
+        let err = |m: String| Err(PlyError::header(ln, m));
         match w.first().copied() {
             Some("format") => {
                 format = Some(match w.get(1).copied() {
                     Some("ascii") => Format::Ascii,
                     Some("binary_little_endian") => Format::Le,
                     Some("binary_big_endian") => Format::Be,
-                    other => return Err(err(ln, format!("unknown format {other:?}"))),
+                    other => return err(format!("unknown format {other:?}")),
                 })
             }
             Some("element") => {
                 let (Some(name), Some(count)) = (w.get(1), w.get(2).and_then(|c| c.parse().ok()))
                 else {
-                    return Err(err(ln, format!("bad element line '{l}'")));
+                    return err(format!("bad element line '{l}'"));
                 };
                 elements.push(Element {
                     name: name.to_string(),
@@ -378,7 +423,7 @@ fn load_ply(path: &Path) -> Result<Raw> {
             }
             Some("property") => {
                 let Some(el) = elements.last_mut() else {
-                    return Err(err(ln, "property before any element".into()));
+                    return err("property before any element".into());
                 };
                 let p = if w.get(1) == Some(&"list") {
                     match (
@@ -387,85 +432,129 @@ fn load_ply(path: &Path) -> Result<Raw> {
                         w.get(4),
                     ) {
                         (Some(c), Some(i), Some(n)) => Prop::List(n.to_string(), c, i),
-                        _ => return Err(err(ln, format!("bad list property '{l}'"))),
+                        _ => return err(format!("bad list property '{l}'")),
                     }
                 } else {
                     match (w.get(1).and_then(|s| Scalar::parse(s)), w.get(2)) {
                         (Some(t), Some(n)) => Prop::Scalar(n.to_string(), t),
-                        _ => return Err(err(ln, format!("bad property '{l}'"))),
+                        _ => return err(format!("bad property '{l}'")),
                     }
                 };
                 el.props.push(p);
             }
             Some("end_header") => break,
             Some("comment") | Some("obj_info") | None => {}
-            Some(other) => return Err(err(ln, format!("unknown header keyword '{other}'"))),
+            Some(other) => return err(format!("unknown header keyword '{other}'")),
         }
     }
     let Some(format) = format else {
-        return Err(err(ln, "missing 'format' line".into()));
+        return Err(PlyError::header(ln, "missing 'format' line"));
     };
-    let mut rd = PlyReader {
-        r,
+    Ok((format, elements, pos.min(data.len())))
+}
+
+/// Parse PLY bytes (see the section comment for what is read).
+pub fn parse_ply(data: &[u8]) -> std::result::Result<PlyMesh, PlyError> {
+    let (format, elements, body) = ply_header(data)?;
+    let mut rd = Body {
+        data,
+        pos: body,
         format,
-        tokens: Vec::new().into_iter(),
     };
-    let (mut positions, mut normals, mut tris) = (Vec::new(), Vec::new(), Vec::new());
-    let mut has_normals = false;
-    let bad = |m: String| Error::invalid(format!("{}: PLY data: {m}", path.display()));
+    let bad = |m: String| PlyError::data(m);
+    let mut out = PlyMesh::default();
+    let (mut normals, mut uvs) = (Vec::new(), Vec::new());
     for el in &elements {
-        let idx = |n: &str| {
-            el.props
-                .iter()
-                .position(|p| matches!(p, Prop::Scalar(x, _) if x == n))
+        let slot_of = |n: &str| -> Option<usize> {
+            Some(match n {
+                "x" => 0,
+                "y" => 1,
+                "z" => 2,
+                "nx" => 3,
+                "ny" => 4,
+                "nz" => 5,
+                "u" | "s" | "texture_u" | "texture_s" => 6,
+                "v" | "t" | "texture_v" | "texture_t" => 7,
+                _ => return None,
+            })
         };
-        let (ix, iy, iz) = (idx("x"), idx("y"), idx("z"));
-        let (inx, iny, inz) = (idx("nx"), idx("ny"), idx("nz"));
-        if el.name == "vertex" {
-            if ix.is_none() || iy.is_none() || iz.is_none() {
+        let is_vertex = el.name == "vertex";
+        if is_vertex {
+            let has = |n: &str| {
+                el.props
+                    .iter()
+                    .any(|p| matches!(p, Prop::Scalar(x, _) if x == n))
+            };
+            if !(has("x") && has("y") && has("z")) {
                 return Err(bad("vertex element lacks x, y, z".into()));
             }
-            has_normals = inx.is_some() && iny.is_some() && inz.is_some();
+            out.positions.reserve(el.count.min(1 << 20));
         }
-        let mut vals = vec![0.0f64; el.props.len()];
+        let mut face: Vec<u32> = Vec::new();
         for _ in 0..el.count {
-            let mut face: Vec<u32> = Vec::new();
-            for (k, p) in el.props.iter().enumerate() {
+            let mut v = [f64::NAN; 8]; // x y z nx ny nz u v
+            face.clear();
+            for p in &el.props {
                 match p {
-                    Prop::Scalar(_, t) => vals[k] = rd.value(*t).map_err(&bad)?,
+                    Prop::Scalar(name, t) => {
+                        let x = rd.value(*t).map_err(bad)?;
+                        if is_vertex && let Some(k) = slot_of(name) {
+                            v[k] = x;
+                        }
+                    }
                     Prop::List(name, ct, it) => {
-                        let c = rd.value(*ct).map_err(&bad)?;
-                        if !(0.0..=1e6).contains(&c) {
-                            return Err(bad(format!("list length {c}")));
+                        let c = rd.value(*ct).map_err(bad)?;
+                        if !(0.0..=1e6).contains(&c) || c.fract() != 0.0 {
+                            return Err(bad(format!("bad list length {c}")));
                         }
                         let is_face = el.name == "face"
                             && (name == "vertex_indices" || name == "vertex_index");
                         for _ in 0..c as usize {
-                            let v = rd.value(*it).map_err(&bad)?;
+                            let i = rd.value(*it).map_err(bad)?;
                             if is_face {
-                                if v < 0.0 {
-                                    return Err(bad(format!("negative vertex index {v}")));
+                                if !(i >= 0.0 && i.fract() == 0.0 && i < u32::MAX as f64) {
+                                    return Err(bad(format!(
+                                        "negative or non-integer vertex index {i}"
+                                    )));
                                 }
-                                face.push(v as u32);
+                                face.push(i as u32);
                             }
                         }
                     }
                 }
             }
-            if el.name == "vertex" {
-                let g = |i: Option<usize>| vals[i.unwrap()] as f32;
-                positions.push(Vec3::new(g(ix), g(iy), g(iz)));
-                if has_normals {
-                    normals.push(Vec3::new(g(inx), g(iny), g(inz)));
+            if is_vertex {
+                out.positions.push(glam::DVec3::new(v[0], v[1], v[2]));
+                if v[3..6].iter().all(|x| !x.is_nan()) {
+                    normals.push(glam::DVec3::new(v[3], v[4], v[5]));
                 }
-            } else if el.name == "face" && face.len() >= 3 {
+                if v[6..8].iter().all(|x| !x.is_nan()) {
+                    uvs.push(glam::Vec2::new(v[6] as f32, v[7] as f32));
+                }
+            } else if face.len() >= 3 {
                 for k in 1..face.len() - 1 {
-                    tris.push([face[0], face[k], face[k + 1]]);
+                    out.triangles.push([face[0], face[k], face[k + 1]]);
                 }
             }
         }
     }
-    Ok((positions, has_normals.then_some(normals), tris))
+    let nv = out.positions.len();
+    if let Some(i) = out.triangles.iter().flatten().find(|&&i| i as usize >= nv) {
+        return Err(bad(format!("face index {i} out of range ({nv} vertices)")));
+    }
+    out.normals = (nv > 0 && normals.len() == nv).then_some(normals);
+    out.uvs = (nv > 0 && uvs.len() == nv).then_some(uvs);
+    Ok(out)
+}
+
+fn load_ply(path: &Path) -> Result<Raw> {
+    let m = read_ply(path)?;
+    let v = |p: &glam::DVec3| p.as_vec3();
+    Ok((
+        m.positions.iter().map(v).collect(),
+        m.normals.map(|n| n.iter().map(v).collect()),
+        m.triangles,
+    ))
 }
 
 #[cfg(test)]
@@ -482,5 +571,47 @@ mod tests {
         .unwrap();
         let e = load_mesh(&p).unwrap_err().to_string();
         assert!(e.contains("bad.ply:5"), "{e}");
+    }
+
+    #[test]
+    fn ascii_and_binary_quads_with_uvs() {
+        let a = b"ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nproperty float u\nproperty float v\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0 0 0\n1 0 0 1 0\n1 1 0 1 1\n0 1 0 0 1\n4 0 1 2 3\n";
+        let m = parse_ply(a).unwrap();
+        assert_eq!(m.positions.len(), 4);
+        assert_eq!(m.triangles, vec![[0, 1, 2], [0, 2, 3]]);
+        assert_eq!(m.uvs.as_ref().unwrap()[2], glam::Vec2::new(1.0, 1.0));
+        assert!(m.normals.is_none());
+        for be in [false, true] {
+            let mut b = format!(
+                "ply\nformat binary_{}_endian 1.0\nelement vertex 3\nproperty double x\nproperty double y\nproperty double z\nelement face 1\nproperty list uchar uint vertex_indices\nend_header\n",
+                if be { "big" } else { "little" }
+            )
+            .into_bytes();
+            for v in [0.0f64, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 3.0, 0.5] {
+                b.extend_from_slice(&if be { v.to_be_bytes() } else { v.to_le_bytes() });
+            }
+            b.push(3);
+            for i in [0u32, 1, 2] {
+                b.extend_from_slice(&if be { i.to_be_bytes() } else { i.to_le_bytes() });
+            }
+            let m = parse_ply(&b).unwrap();
+            assert_eq!(m.positions[2], glam::DVec3::new(0.0, 3.0, 0.5));
+            assert_eq!(m.triangles, vec![[0, 1, 2]]);
+            let e = parse_ply(&b[..b.len() - 2]).unwrap_err();
+            assert_eq!(e.line, None);
+            assert!(e.message.contains("end of file"), "{e:?}");
+        }
+    }
+
+    #[test]
+    fn out_of_range_and_negative_indices_are_errors() {
+        let h = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n";
+        let e = parse_ply(format!("{h}3 0 1 7\n").as_bytes()).unwrap_err();
+        assert!(e.message.contains("face index 7 out of range"), "{e:?}");
+        let e = parse_ply(format!("{h}3 0 -1 2\n").as_bytes()).unwrap_err();
+        assert!(e.message.contains("negative"), "{e:?}");
+        let e = parse_ply(b"ply\nformat ascii 1.0\nelement vertex 1\n").unwrap_err();
+        assert_eq!(e.line, Some(4)); // the missing line
+        assert!(e.message.contains("end_header"), "{e:?}");
     }
 }

@@ -8,7 +8,7 @@
 //!
 //! Modules: [`lexer`] (tokens with byte spans), [`params`] (typed parameter lists,
 //! spectra), [`parser`] (directives, graphics state, includes), [`to_scene`]
-//! (mapping onto the scene model), [`ply`], [`subdiv`], [`paper`] (the paper's
+//! (mapping onto the scene model), PLY via [`crate::scene::mesh_io::read_ply`], [`subdiv`], [`paper`] (the paper's
 //! spectra for the ISET Cornell box), [`bench`].
 //!
 //! ## Object labels
@@ -39,7 +39,6 @@ pub mod lexer;
 pub mod paper;
 pub mod params;
 pub mod parser;
-pub mod ply;
 pub mod subdiv;
 pub mod to_scene;
 

@@ -906,8 +906,24 @@ pub fn shape(s: &ShapeInput, ctx: &mut Ctx) -> PResult<Option<Geometry>> {
             };
             mark_used(p, &["displacement", "edgelength"]);
             let path = ctx.resolve_path(&f);
-            super::ply::read(&path)
-                .map_err(|m| SpanError::new(p.span_of("filename").unwrap_or(s.span), m))?
+            let at = p.span_of("filename").unwrap_or(s.span);
+            let m = crate::scene::mesh_io::read_ply(&path)
+                .map_err(|e| SpanError::new(at, e.to_string()))?;
+            if m.positions.iter().any(|v| !v.is_finite()) {
+                return Err(SpanError::new(
+                    at,
+                    format!(
+                        "{}: PLY data: vertex without finite x, y, z",
+                        path.display()
+                    ),
+                ));
+            }
+            RawMesh {
+                p: m.positions,
+                n: m.normals,
+                uv: m.uvs,
+                tri: m.triangles,
+            }
         }
         "sphere" => {
             let r = p.float("radius", 1.0)?;
