@@ -74,21 +74,7 @@ pub fn load_lens(path: &Path) -> Result<LensFile> {
         path: path.to_path_buf(),
         message: e.to_string(),
     })?;
-    let v: Value = serde_json::from_str(&text).map_err(|e| {
-        let offset = text
-            .lines()
-            .take(e.line().saturating_sub(1))
-            .map(|l| l.len() + 1)
-            .sum::<usize>()
-            + e.column().saturating_sub(1);
-        Error::from(crate::diag::Located::at_offset(
-            path,
-            &text,
-            offset,
-            1,
-            format!("invalid JSON: {e}"),
-        ))
-    })?;
+    let v: Value = crate::diag::parse_json(path, &text)?;
     if v.get("polynomials").is_some() {
         Ok(LensFile::Rtf(Rtf::from_value(&v, path)?))
     } else if v.get("surfaces").is_some() {

@@ -165,21 +165,7 @@ impl Prescription {
 
     /// Parse ISET lens JSON.
     pub fn from_json(text: &str, file: &Path) -> Result<Self> {
-        let v: Value = serde_json::from_str(text).map_err(|e| {
-            let offset = text
-                .lines()
-                .take(e.line().saturating_sub(1))
-                .map(|l| l.len() + 1)
-                .sum::<usize>()
-                + e.column().saturating_sub(1);
-            Error::from(crate::diag::Located::at_offset(
-                file,
-                text,
-                offset,
-                1,
-                format!("invalid JSON: {e}"),
-            ))
-        })?;
+        let v: Value = crate::diag::parse_json(file, text)?;
         Self::from_value(&v, file)
     }
 
