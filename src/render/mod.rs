@@ -31,19 +31,20 @@
 //!   min(1, max-band throughput).
 //! - Performance (`bench/mitsuba_compare.sh`: Mitsuba `cornell_box()`, 256²,
 //!   max_depth 7 = max_bounces 6, 2 threads, CIE Y against one converged
-//!   Mitsuba reference, box filter; 2026-11-23, load ≈ 4 on 2 cores):
-//!   camsim (31 bands, 4-wide BVH) 0.513 M paths/s wall, 0.521 M per CPU-s;
-//!   Mitsuba 3.9.1 `llvm_ad_spectral` (4 wavelengths) 0.472 M paths/s, 0.473 M
-//!   per CPU-s → ratio 1.09 (wall) / 1.10 (CPU). Equal-time relative RMSE:
-//!   all pixels camsim/Mitsuba 0.988 ± 0.049, light transport only (emitter
-//!   edge excluded) 1.041 ± 0.002. Converged images agree (mean Y ratio
-//!   0.9999, 16×16 blocks 0.47 % RMS). Mitsuba's LLVM `render()` returns
-//!   before its kernels run (17 ms for a 12 s render): timing it without
-//!   synchronising gave the 3–9 M paths/s quoted earlier — an artefact.
-//!   camsim's Russian roulette (from the 2nd bounce, survival = max-band
-//!   throughput, as pbrt-v4) is noisier per sample than Mitsuba's (from depth
-//!   5) but equally efficient per unit time (measured 1/(RMSE²·t) for roulette
-//!   start 2…5: 5.21, 5.21, 5.04, 5.01).
+//!   Mitsuba reference, box filter, 4 seeds; 2026-11-23, idle 2-core machine):
+//!   camsim (31 bands, 4-wide BVH, stratified film positions) 1.048 M paths/s
+//!   wall, 0.534 M per CPU-s; Mitsuba 3.9.1 `llvm_ad_spectral` (4 wavelengths,
+//!   default independent sampler) 0.918 M paths/s, 0.460 M per CPU-s → ratio
+//!   1.14 (wall) / 1.16 (CPU). Equal-time relative RMSE camsim/Mitsuba: all
+//!   pixels 0.918 ± 0.049 (0.873 at equal CPU time); light transport only
+//!   (emitter edge ±2 px excluded) 1.014 ± 0.003 (1.005 at equal CPU time).
+//!   Converged images agree (mean Y ratio 0.9998, 16×16 blocks 0.46 % RMS).
+//!   Mitsuba's LLVM `render()` returns before its kernels run (17 ms for a
+//!   12 s render): timing it without synchronising gave the 3–9 M paths/s
+//!   quoted earlier — an artefact. camsim's Russian roulette (from the 2nd
+//!   bounce, survival = max-band throughput, as pbrt-v4) is noisier per
+//!   sample than Mitsuba's (from depth 5) but as efficient per unit time
+//!   (measured 1/(RMSE²·t) for roulette start 2…5: 5.21, 5.21, 5.04, 5.01).
 
 // `!(x > 0.0)` is deliberate throughout: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
