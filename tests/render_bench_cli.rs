@@ -6,6 +6,13 @@ fn camsim() -> Command {
     Command::new(env!("CARGO_BIN_EXE_camsim"))
 }
 
+/// `camsim bench render --spp 1 --bvh bvh4` plus the caller's options.
+fn bench_1spp() -> Command {
+    let mut c = camsim();
+    c.args(["bench", "render", "--spp", "1", "--bvh", "bvh4"]);
+    c
+}
+
 fn read_pfm_mean(p: &std::path::Path) -> f64 {
     let (w, h, d) = camsim::render::bench::read_pfm(p).unwrap();
     assert_eq!((w, h), (256, 256));
@@ -21,18 +28,8 @@ fn bench_scene_mean_luminance_matches_mitsuba() {
     // catches a wrong spectrum, emitter scale, camera or bounce count.
     let dir = tempfile::tempdir().unwrap();
     let y = dir.path().join("y.pfm");
-    let out = camsim()
-        .args([
-            "bench",
-            "render",
-            "--spp",
-            "1",
-            "--ref-spp",
-            "0",
-            "--bvh",
-            "bvh4",
-        ])
-        .args(["--threads", "2", "--y-out"])
+    let out = bench_1spp()
+        .args(["--ref-spp", "0", "--threads", "2", "--y-out"])
         .arg(&y)
         .output()
         .unwrap();
@@ -47,19 +44,7 @@ fn bench_scene_mean_luminance_matches_mitsuba() {
     assert!((m / 0.15380 - 1.0).abs() < 0.02, "mean Y {m}");
 
     // The same image as a reference: RMSE 0, reported on the machine line.
-    let out = camsim()
-        .args([
-            "bench",
-            "render",
-            "--spp",
-            "1",
-            "--bvh",
-            "bvh4",
-            "--reference",
-        ])
-        .arg(&y)
-        .output()
-        .unwrap();
+    let out = bench_1spp().arg("--reference").arg(&y).output().unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "{stdout}");
     assert!(stdout.contains(" rmse_y=0.000000e0 "), "{stdout}");
@@ -70,16 +55,8 @@ fn bench_render_rejects_bad_options_with_named_files() {
     let dir = tempfile::tempdir().unwrap();
     let small = dir.path().join("small.pfm");
     camsim::render::bench::write_pfm(&small, 2, 1, &[0.0, 1.0]).unwrap();
-    let out = camsim()
-        .args([
-            "bench",
-            "render",
-            "--spp",
-            "1",
-            "--bvh",
-            "bvh4",
-            "--reference",
-        ])
+    let out = bench_1spp()
+        .arg("--reference")
         .arg(&small)
         .output()
         .unwrap();
