@@ -1,7 +1,7 @@
 //! `camsim measure …`: the measurements on captured or simulated image files
 //! (PNG 8/16-bit, OpenEXR, DNG). Output is CSV on stdout; figures follow as
 //! `# quantity=value ± stderr unit` comment lines.
-use camsim::measure::io::{LoadedImage, read_image, read_label_map};
+use camsim::measure::io::{LoadedImage, read_image, read_label_map_for};
 use camsim::measure::plane::{Plane, parse_rect};
 use camsim::measure::{Measured, mcc, noise, profile, ri, sfr};
 use camsim::{Error, Result};
@@ -216,25 +216,9 @@ fn run_ri(a: RiArgs) -> Result<i32> {
     Ok(0)
 }
 
-fn labelled(img: &LoadedImage, l: &LabelArgs) -> Result<(Vec<u32>, Vec<String>)> {
-    let (w, h, labels, names) = read_label_map(&l.labels, &l.names)?;
-    if (w, h) != (img.width, img.height) {
-        return Err(Error::io(
-            &l.labels,
-            format!(
-                "label map is {w}×{h} but {} is {}×{}",
-                img.path.display(),
-                img.width,
-                img.height
-            ),
-        ));
-    }
-    Ok((labels, names))
-}
-
 fn run_profile(a: ProfileArgs) -> Result<i32> {
     let img = read_image(&a.image)?;
-    let (labels, names) = labelled(&img, &a.label)?;
+    let (labels, names) = read_label_map_for(&img, &a.label.labels, &a.label.names)?;
     let views = img.views();
     let step = if img.mosaic.is_some() { 2 } else { 1 };
     let opts = profile::ProfileOptions {
@@ -257,7 +241,7 @@ fn run_profile(a: ProfileArgs) -> Result<i32> {
 
 fn run_mcc(a: MccArgs) -> Result<i32> {
     let img = read_image(&a.image)?;
-    let (labels, names) = labelled(&img, &a.label)?;
+    let (labels, names) = read_label_map_for(&img, &a.label.labels, &a.label.names)?;
     let views = img.views();
     let patches = mcc::patch_means(&views, &labels, &names, &a.chart, a.erode)
         .map_err(|e| Error::io(&a.image, e))?;

@@ -41,7 +41,7 @@ use super::stages;
 use crate::figure::Figure;
 use crate::image::SensorImage;
 use crate::measure::Measured;
-use crate::measure::io::{LoadedImage, read_image, read_label_map};
+use crate::measure::io::{LoadedImage, read_image, read_label_map_for};
 use crate::optical_image::{OpticalImage, Rect};
 use crate::params::Value;
 use crate::{Error, Result};
@@ -352,21 +352,7 @@ pub struct Capture {
 pub fn load_capture(c: &MeasuredInput) -> Result<Capture> {
     let image = read_image(&c.file.path)?;
     let labels = match (&c.labels, &c.names) {
-        (Some(l), Some(n)) => {
-            let (w, h, labels, names) = read_label_map(&l.path, &n.path)?;
-            if (w, h) != (image.width, image.height) {
-                return Err(Error::io(
-                    &l.path,
-                    format!(
-                        "label map is {w}×{h} but the captured image {} is {}×{}",
-                        c.file.path.display(),
-                        image.width,
-                        image.height
-                    ),
-                ));
-            }
-            Some((labels, names))
-        }
+        (Some(l), Some(n)) => Some(read_label_map_for(&image, &l.path, &n.path)?),
         _ => None,
     };
     Ok(Capture {
@@ -374,16 +360,6 @@ pub fn load_capture(c: &MeasuredInput) -> Result<Capture> {
         labels,
         pixel_pitch_m: c.pixel_um.map(|p| p * 1e-6),
     })
-}
-
-fn prefixed(mut m: Measured, p: &str) -> Measured {
-    for f in &mut m.figures {
-        f.quantity = format!("{p}/{}", f.quantity);
-    }
-    for c in &mut m.curves {
-        c.name = format!("{p}/{}", c.name);
-    }
-    m
 }
 
 /// Run measurement `m` on the captured image `cap` (called `input`).
@@ -443,7 +419,7 @@ pub fn measure_capture(
             let mut out = Measured::default();
             for (p, r) in regions {
                 let (sfr, r) = crate::measure::sfr::sfr_of_region(&plane, r, &opts).map_err(err)?;
-                let x = prefixed(sfr.measured(&m.name, r), &p);
+                let x = sfr.measured(&m.name, r).prefixed(&p);
                 out.figures.extend(x.figures);
                 out.curves.extend(x.curves);
                 out.pixels_read.extend(x.pixels_read);

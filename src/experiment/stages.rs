@@ -546,16 +546,6 @@ fn label_box(labels: &[u32], names: &[String], w: u32, h: u32, name: &str) -> Op
     (x0 != u32::MAX).then(|| Rect::new(x0, y0, x1 - x0, y1 - y0))
 }
 
-fn prefixed(mut m: Measured, obj: &str) -> Measured {
-    for f in &mut m.figures {
-        f.quantity = format!("{obj}/{}", f.quantity);
-    }
-    for c in &mut m.curves {
-        c.name = format!("{obj}/{}", c.name);
-    }
-    m
-}
-
 /// Run one measurement: figures for results.csv and curves for the report.
 pub fn measure(
     m: &Measure,
@@ -622,7 +612,7 @@ pub fn measure(
                     crate::measure::sfr::sfr_of_region(&plane, roi, &opts).map_err(|e| {
                         Error::invalid(format!("measurement '{}', edge '{obj}': {e}", m.name))
                     })?;
-                let r = prefixed(sfr.measured(&m.name, roi), obj);
+                let r = sfr.measured(&m.name, roi).prefixed(obj);
                 out.figures.extend(r.figures);
                 out.curves.extend(r.curves);
                 out.pixels_read.extend(r.pixels_read);

@@ -440,6 +440,27 @@ fn read_tiff(path: &Path, b: &[u8]) -> Result<LoadedImage> {
     })
 }
 
+/// [`read_label_map`] for `image`: the map must have the image's size.
+pub fn read_label_map_for(
+    image: &LoadedImage,
+    png_path: &Path,
+    names_path: &Path,
+) -> Result<(Vec<u32>, Vec<String>)> {
+    let (w, h, labels, names) = read_label_map(png_path, names_path)?;
+    if (w, h) != (image.width, image.height) {
+        return Err(Error::io(
+            png_path,
+            format!(
+                "label map is {w}×{h} but the captured image {} is {}×{}",
+                image.path.display(),
+                image.width,
+                image.height
+            ),
+        ));
+    }
+    Ok((labels, names))
+}
+
 /// Object labels for a captured image: a grey PNG whose value k > 0 marks
 /// object k and a text file whose k-th line (1-based) names it; value 0 is
 /// "no object". Returns per-pixel label ids (k − 1, or `scene::NO_OBJECT`) and names.

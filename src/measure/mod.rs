@@ -65,3 +65,17 @@ pub struct Measured {
     pub curves: Vec<Curve>,
     pub pixels_read: Vec<crate::optical_image::Rect>,
 }
+
+impl Measured {
+    /// Prefix every figure quantity and curve name with `p/` (an object or
+    /// input name), so several runs of one measurement stay apart.
+    pub fn prefixed(mut self, p: &str) -> Measured {
+        for f in &mut self.figures {
+            f.quantity = format!("{p}/{}", f.quantity);
+        }
+        for c in &mut self.curves {
+            c.name = format!("{p}/{}", c.name);
+        }
+        self
+    }
+}
