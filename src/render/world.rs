@@ -326,13 +326,14 @@ impl World {
         let mut power = Vec::new();
         for (prim, e) in &emitters {
             let le = resample(&e.radiance, grid, "emission")?;
-            let pw = mean(&le) * shapes[*prim].area() * PI * if e.two_sided { 2.0 } else { 1.0 };
+            let area = shapes[*prim].area();
+            let pw = mean(&le) * area * PI * if e.two_sided { 2.0 } else { 1.0 };
             info[*prim].light = lights.len() as u32;
             lights.push(LightKind::Area {
                 prim: *prim as u32,
                 le,
                 two_sided: e.two_sided,
-                area: shapes[*prim].area(),
+                area,
             });
             power.push(pw);
         }
@@ -430,8 +431,9 @@ impl World {
         })
     }
 
-    /// Pick a light and sample a direction to it from point `p`. Radiance
-    /// arriving at `p` (unoccluded) is written to `li`.
+    /// Pick a light and sample a direction to it from point `p`. The sample
+    /// references the light's spectrum: radiance arriving at `p` (unoccluded)
+    /// is `scale · spec`.
     pub fn sample_light(&self, p: Vec3, u0: f32, u1: f32, u2: f32) -> Option<LightSample<'_>> {
         if self.lights.is_empty() {
             return None;
