@@ -8,7 +8,7 @@ use camsim::experiment::spec::Measure;
 use camsim::figure::Figure;
 use camsim::measure::Measured;
 use camsim::params::{Params, Value};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 fn camsim(args: &[&str]) -> Output {
@@ -548,15 +548,17 @@ fn dng_capture_is_measured_per_cfa_channel_and_matches_the_png() {
     assert_eq!(get(&rows, "compare", "slope").0, 1.0);
 }
 
-/// The KDL Cornell box (320×240 film, only the chart's pixels rendered) with
-/// the MCC and the generic sensor; `sensor_extra` goes on the sensor node.
-fn mcc_convergence_run(d: &Path, sensor_extra: &str) -> Vec<(String, String, String, f64, f64)> {
+/// Experiment `name` on the KDL Cornell box (320×240 film, only the chart's
+/// pixels rendered) with the MCC and the generic sensor; `sensor_extra` goes on
+/// the sensor node, `body` holds the render and measure lines. Returns the
+/// run's output and its results directory.
+fn run_cbox_mcc(d: &Path, name: &str, sensor_extra: &str, body: &str) -> (Output, PathBuf) {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let exp = d.join("mccconv.kdl");
+    let exp = d.join(format!("{name}.kdl"));
     std::fs::write(
         &exp,
         format!(
-            "experiment \"mccconv\" {{\n    scene \"{}\"\n    add \"mcc\" target=\"mcc\"\n    sensor \"{}\" {sensor_extra}\n    render spp=4 max-bounces=2 seed=5\n    measure \"mcc\" of=\"mcc\"\n    measure \"convergence\" of=\"mcc\" spp=(4 16)\n}}\n",
+            "experiment \"{name}\" {{\n    scene \"{}\"\n    add \"mcc\" target=\"mcc\"\n    sensor \"{}\" {sensor_extra}\n{body}}}\n",
             root.join("scenes/cornell-box.kdl").display(),
             root.join("sensors/generic.kdl").display(),
         ),
@@ -564,8 +566,19 @@ fn mcc_convergence_run(d: &Path, sensor_extra: &str) -> Vec<(String, String, Str
     .unwrap();
     let out = d.join("out");
     let r = camsim(&["run", exp.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    (r, out.join(name))
+}
+
+/// MCC means and their convergence (spp 4 and 16) on the KDL Cornell box.
+fn mcc_convergence_run(d: &Path, sensor_extra: &str) -> Vec<(String, String, String, f64, f64)> {
+    let (r, out) = run_cbox_mcc(
+        d,
+        "mccconv",
+        sensor_extra,
+        "    render spp=4 max-bounces=2 seed=5\n    measure \"mcc\" of=\"mcc\"\n    measure \"convergence\" of=\"mcc\" spp=(4 16)\n",
+    );
     assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
-    results(&out.join("mccconv/results.csv"))
+    results(&out.join("results.csv"))
 }
 
 /// Every sensor noise source off, so a patch mean's standard error is the
@@ -642,20 +655,12 @@ fn convergence_leaves_out_clipped_mcc_patches() {
 #[test]
 fn dark_mcc_is_an_error_not_zero_dv() {
     let tmp = tempfile::tempdir().unwrap();
-    let d = tmp.path();
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let exp = d.join("dark.kdl");
-    std::fs::write(
-        &exp,
-        format!(
-            "experiment \"dark\" {{\n    scene \"{}\"\n    add \"mcc\" target=\"mcc\"\n    sensor \"{}\" exposure-s=1e-9\n    render spp=1 max-bounces=1\n    measure \"mcc\" of=\"mcc\"\n}}\n",
-            root.join("scenes/cornell-box.kdl").display(),
-            root.join("sensors/generic.kdl").display(),
-        ),
-    )
-    .unwrap();
-    let out = d.join("out");
-    let r = camsim(&["run", exp.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let (r, _) = run_cbox_mcc(
+        tmp.path(),
+        "dark",
+        "exposure-s=1e-9",
+        "    render spp=1 max-bounces=1\n    measure \"mcc\" of=\"mcc\"\n",
+    );
     assert_eq!(r.status.code(), Some(1), "{}", stderr(&r));
     let e = stderr(&r);
     assert!(

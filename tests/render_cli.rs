@@ -6,15 +6,31 @@ fn camsim() -> Command {
     Command::new(env!("CARGO_BIN_EXE_camsim"))
 }
 
+/// `camsim render ARGS --out OUT` must exit 0 (stderr shown otherwise).
+fn render_ok(args: &[&str], out: &std::path::Path) {
+    let st = camsim()
+        .arg("render")
+        .args(args)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .unwrap();
+    assert_eq!(
+        st.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+}
+
 #[test]
 fn cornell_box_kdl_renders_identically_on_one_and_two_threads() {
     let dir = tempfile::tempdir().unwrap();
     let mut outs = vec![];
     for threads in ["1", "2"] {
         let out = dir.path().join(format!("cb{threads}.exr"));
-        let st = camsim()
-            .args([
-                "render",
+        render_ok(
+            &[
                 "scenes/cornell-box.kdl",
                 "--spp",
                 "2",
@@ -24,15 +40,8 @@ fn cornell_box_kdl_renders_identically_on_one_and_two_threads() {
                 "7",
                 "--threads",
                 threads,
-                "--out",
-            ])
-            .arg(&out)
-            .output()
-            .unwrap();
-        assert!(
-            st.status.success(),
-            "{}",
-            String::from_utf8_lossy(&st.stderr)
+            ],
+            &out,
         );
         assert!(out.with_extension("png").exists());
         let side: serde_json::Value =
@@ -52,46 +61,28 @@ fn cornell_box_kdl_renders_identically_on_one_and_two_threads() {
 fn pbrt_scenes_render_and_kdl_errors_are_located() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("bitterli.exr");
-    let st = camsim()
-        .args([
-            "render",
+    render_ok(
+        &[
             "scenes/pbrt-v4/bitterli-cornell-box.pbrt",
             "--spp",
             "1",
             "--roi",
             "0,0,16,16",
-            "--out",
-        ])
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert_eq!(
-        st.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
+        ],
+        &out,
     );
     assert!(out.exists() && out.with_extension("png").exists());
     let out2 = dir.path().join("cbox.exr");
-    let st = camsim()
-        .args([
-            "render",
+    render_ok(
+        &[
             "scenes/CornellBoxReference/CornellBoxReference.pbrt",
             "--paper-spectra",
             "--spp",
             "1",
             "--roi",
             "600,300,8,8",
-            "--out",
-        ])
-        .arg(&out2)
-        .output()
-        .unwrap();
-    assert_eq!(
-        st.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
+        ],
+        &out2,
     );
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("bad.kdl");
