@@ -357,15 +357,12 @@ impl Bvh4 {
         let mut best_prim = EMPTY;
         // Uninitialised: zeroing the stack per ray showed up as memset in profiles.
         let mut stack = [const { MaybeUninit::<(u32, f32)>::uninit() }; STACK];
-        stack[0].write((self.root, 0.0));
-        let mut sp = 1usize;
-        while sp > 0 {
-            sp -= 1;
-            // SAFETY: entries below `sp` were written before being counted.
-            let (code, tn) = unsafe { stack[sp].assume_init() };
-            if tn > best.t {
-                continue;
-            }
+        let mut sp = 0usize;
+        // The node being visited is kept out of the stack: a node with one
+        // child hit continues straight into it, several push all but the
+        // nearest (far to near) and continue into the nearest.
+        let mut code = self.root;
+        'visit: loop {
             if code & LEAF != 0 {
                 let leaf = &self.leaves[(code & !LEAF) as usize];
                 if leaf.packet != EMPTY {
@@ -403,30 +400,48 @@ impl Bvh4 {
                         best_prim = prim;
                     }
                 }
-                continue;
-            }
-            let node = &self.nodes[code as usize];
-            let (mask, tna) = r.boxes(node, best.t);
-            if mask == 0 {
-                continue;
-            }
-            // Push far to near so the nearest child is visited first.
-            let mut hits = [(0u32, 0.0f32); 4];
-            let mut nh = 0;
-            for l in 0..4 {
-                if mask & (1 << l) != 0 {
-                    let mut j = nh;
-                    while j > 0 && hits[j - 1].1 < tna[l] {
-                        hits[j] = hits[j - 1];
-                        j -= 1;
+            } else {
+                let node = &self.nodes[code as usize];
+                let (mask, tna) = r.boxes(node, best.t);
+                if mask != 0 {
+                    if mask.is_power_of_two() {
+                        code = node.child[mask.trailing_zeros() as usize];
+                        continue 'visit;
                     }
-                    hits[j] = (node.child[l], tna[l]);
-                    nh += 1;
+                    // Sort the hit children far to near.
+                    let mut hits = [(0u32, 0.0f32); 4];
+                    let mut nh = 0;
+                    for l in 0..4 {
+                        if mask & (1 << l) != 0 {
+                            let mut j = nh;
+                            while j > 0 && hits[j - 1].1 < tna[l] {
+                                hits[j] = hits[j - 1];
+                                j -= 1;
+                            }
+                            hits[j] = (node.child[l], tna[l]);
+                            nh += 1;
+                        }
+                    }
+                    for h in &hits[..nh - 1] {
+                        stack[sp].write(*h);
+                        sp += 1;
+                    }
+                    code = hits[nh - 1].0;
+                    continue 'visit;
                 }
             }
-            for h in &hits[..nh] {
-                stack[sp].write(*h);
-                sp += 1;
+            // Next stacked node whose entry lies before the closest hit.
+            loop {
+                if sp == 0 {
+                    break 'visit;
+                }
+                sp -= 1;
+                // SAFETY: entries below `sp` were written before being counted.
+                let (c, tn) = unsafe { stack[sp].assume_init() };
+                if tn <= best.t {
+                    code = c;
+                    continue 'visit;
+                }
             }
         }
         (best_prim != EMPTY).then_some((best_prim, best))
@@ -437,12 +452,9 @@ impl Bvh4 {
     pub fn unoccluded(&self, shapes: &[Shape], o: glam::Vec3, d: glam::Vec3, tmax: f32) -> bool {
         let r = RayPre::new(o, d);
         let mut stack = [const { MaybeUninit::<u32>::uninit() }; STACK];
-        stack[0].write(self.root);
-        let mut sp = 1usize;
-        while sp > 0 {
-            sp -= 1;
-            // SAFETY: entries below `sp` were written before being counted.
-            let code = unsafe { stack[sp].assume_init() };
+        let mut sp = 0usize;
+        let mut code = self.root;
+        'visit: loop {
             if code & LEAF != 0 {
                 let leaf = &self.leaves[(code & !LEAF) as usize];
                 if leaf.packet != EMPTY
@@ -459,16 +471,27 @@ impl Bvh4 {
                         return false;
                     }
                 }
-                continue;
-            }
-            let node = &self.nodes[code as usize];
-            let (mask, _) = r.boxes(node, tmax);
-            for l in 0..4 {
-                if mask & (1 << l) != 0 {
-                    stack[sp].write(node.child[l]);
-                    sp += 1;
+            } else {
+                let node = &self.nodes[code as usize];
+                let (mut mask, _) = r.boxes(node, tmax);
+                if mask != 0 {
+                    // Continue into the first child hit, stack the others.
+                    code = node.child[mask.trailing_zeros() as usize];
+                    mask &= mask - 1;
+                    while mask != 0 {
+                        stack[sp].write(node.child[mask.trailing_zeros() as usize]);
+                        sp += 1;
+                        mask &= mask - 1;
+                    }
+                    continue 'visit;
                 }
             }
+            if sp == 0 {
+                break;
+            }
+            sp -= 1;
+            // SAFETY: entries below `sp` were written before being counted.
+            code = unsafe { stack[sp].assume_init() };
         }
         true
     }

@@ -364,7 +364,7 @@ fn next_down(x: f32) -> f32 {
 /// Offset a ray origin off a surface (pbrt-v4 `OffsetRayOrigin`): push `p` along
 /// the geometric normal `n` by the error bound, to the side of `w`, then round
 /// one ulp away so the new origin is strictly on that side.
-#[inline]
+#[inline(always)]
 pub fn offset_ray_origin(p: Vec3, p_err: Vec3, n: Vec3, w: Vec3) -> Vec3 {
     let dist = n.abs().dot(p_err);
     let mut off = n * dist;

@@ -93,8 +93,7 @@ pub fn trace(
             break;
         };
         let info = world.info[hit.prim as usize];
-        let shape = &world.accel.shapes[hit.prim as usize];
-        let (p, p_err, ng) = shape.surface(o, d, &hit.h);
+        let (p, p_err, ng) = world.surface(hit.prim, o, d, &hit.h);
         let dlen = d.length();
         let wo_w = -d / dlen;
         // Emission.

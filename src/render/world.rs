@@ -6,7 +6,7 @@
 //! instance is treated as a prototype only and is not rendered by itself.
 
 use super::bsdf::Bsdf;
-use super::geometry::{Accel, BvhKind, Shape};
+use super::geometry::{Accel, BvhKind, PrimHit, Shape, gamma};
 use super::sampling::{Frame, sample_cdf, uniform_sphere, uniform_triangle};
 use crate::scene::{Emission, Light, Material, Scene};
 use crate::spectrum::{Spectrum, WavelengthGrid};
@@ -74,6 +74,10 @@ pub struct World {
     pub accel: Accel,
     pub info: Vec<PrimInfo>,
     pub normals: Vec<[Vec3; 3]>,
+    /// Unit geometric normal of each triangle primitive (zero for other
+    /// shapes), computed once at build: the same operations as
+    /// `Shape::surface`, so results are unchanged.
+    tri_ng: Vec<Vec3>,
     pub bsdfs: Vec<Bsdf>,
     pub lights: Vec<LightKind>,
     pub light_pmf: Vec<f32>,
@@ -415,10 +419,18 @@ impl World {
         if let Some(l) = light_cdf.last_mut() {
             *l = 1.0;
         }
+        let tri_ng = shapes
+            .iter()
+            .map(|s| match *s {
+                Shape::Triangle { p } => (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero(),
+                _ => Vec3::ZERO,
+            })
+            .collect();
         Ok(World {
             accel: Accel::build(shapes, kind),
             info,
             normals,
+            tri_ng,
             bsdfs,
             lights,
             light_pmf,
@@ -429,6 +441,21 @@ impl World {
             bands: nb,
             dispersive,
         })
+    }
+
+    /// Surface point, error bound and geometric normal of a hit on primitive
+    /// `prim` (`Shape::surface` with the triangle normal precomputed).
+    #[inline]
+    pub fn surface(&self, prim: u32, o: Vec3, d: Vec3, h: &PrimHit) -> (Vec3, Vec3, Vec3) {
+        match self.accel.shapes[prim as usize] {
+            Shape::Triangle { p } => {
+                let [b0, b1, b2] = h.b;
+                let pt = p[0] * b0 + p[1] * b1 + p[2] * b2;
+                let err = ((p[0] * b0).abs() + (p[1] * b1).abs() + (p[2] * b2).abs()) * gamma(7);
+                (pt, err, self.tri_ng[prim as usize])
+            }
+            ref s => s.surface(o, d, h),
+        }
     }
 
     /// Pick a light and sample a direction to it from point `p`. The sample
@@ -457,7 +484,7 @@ impl World {
                         let pt = v[0] * b0 + v[1] * b1 + v[2] * b2;
                         let err = ((v[0] * b0).abs() + (v[1] * b1).abs() + (v[2] * b2).abs())
                             * super::geometry::gamma(6);
-                        (pt, err, (v[1] - v[0]).cross(v[2] - v[0]).normalize())
+                        (pt, err, self.tri_ng[*prim as usize])
                     }
                     super::geometry::Shape::Sphere { center, radius } => {
                         let n = uniform_sphere(u1, u2);
