@@ -14,6 +14,7 @@ use super::geometry::offset_ray_origin;
 use super::sampling::{Frame, Rng, power_heuristic};
 use super::world::{LightKind, World};
 use glam::Vec3;
+use wide::f32x4;
 
 /// Fraction of a shadow ray's length left untested at its far end, so it does
 /// not hit the light it aims at (pbrt's ShadowEpsilon).
@@ -50,6 +51,24 @@ pub fn first_hit(world: &World, o: Vec3, d: Vec3) -> Option<FirstHit> {
             t: h.h.t,
             object: world.info[h.prim as usize].object,
         })
+}
+
+/// Largest band value (at least 0), four bands at a time. For finite values
+/// the same as folding with `f32::max`; a NaN band may be ignored or returned
+/// (either way the path's non-finite result is counted and dropped).
+#[inline]
+fn max_band(v: &[f32]) -> f32 {
+    let mut acc = f32x4::ZERO;
+    let mut chunks = v.chunks_exact(4);
+    for c in &mut chunks {
+        acc = acc.fast_max(f32x4::new([c[0], c[1], c[2], c[3]]));
+    }
+    let a = acc.to_array();
+    let mut m = a[0].max(a[1]).max(a[2].max(a[3]));
+    for &x in chunks.remainder() {
+        m = m.max(x);
+    }
+    m
 }
 
 #[inline]
@@ -226,7 +245,7 @@ pub fn trace(
         d = wi_w;
         depth += 1;
         // Russian roulette on the throughput with refraction scaling undone.
-        let mut m = sc.beta.iter().fold(0.0f32, |a, &b| a.max(b)) * eta_scale;
+        let mut m = max_band(&sc.beta) * eta_scale;
         if hero.is_some() {
             m /= nb as f32;
         }
