@@ -10,9 +10,10 @@
 //!   same operations in the same order, including the exact-zero edge fallback
 //!   in f64 and pbrt-v4's conservative `t > δt` check. Spheres and disks keep
 //!   the scalar tests.
-//! - Box test: slabs with the near/far plane chosen by the sign of the
-//!   direction (so empty lanes, stored as an inverted box, never hit), the
-//!   inverse direction clamped to ±1e30 (no NaN; a ray lying in a slab plane
+//! - Box test: slabs, near/far distance per axis by min/max of the two plane
+//!   distances (no per-ray index into the node: the same values as choosing
+//!   the plane by the direction's sign; empty lanes are masked by the node's
+//!   `valid` bits), the inverse direction clamped to ±1e30 (no NaN; a ray lying in a slab plane
 //!   counts as inside), and the far distance widened by 1 + 2γ(3) as pbrt does
 //!   for robustness.
 //! - Closest hit visits children near to far and skips any whose entry
@@ -41,6 +42,8 @@ struct Node4 {
     /// `b[0]` = box minima, `b[1]` = maxima; `[axis]`; lanes = children.
     b: [[f32x4; 3]; 2],
     child: [u32; 4],
+    /// Bit l set when lane l holds a child.
+    valid: u32,
 }
 
 impl Node4 {
@@ -51,6 +54,7 @@ impl Node4 {
                 [f32x4::splat(f32::NEG_INFINITY); 3],
             ],
             child: [EMPTY; 4],
+            valid: 0,
         }
     }
 }
@@ -84,7 +88,6 @@ pub struct Bvh4 {
 struct RayPre {
     inv: [f32x4; 3],
     os: [f32x4; 3],
-    near: [usize; 3],
     tri: TriRay,
     k: [usize; 3],
 }
@@ -111,7 +114,6 @@ impl RayPre {
         RayPre {
             inv: inv.map(f32x4::splat),
             os: [f32x4::splat(o.x), f32x4::splat(o.y), f32x4::splat(o.z)],
-            near: inv.map(|x| usize::from(x.is_sign_negative())),
             tri,
             k: [kx, ky, kz],
         }
@@ -124,13 +126,13 @@ impl RayPre {
         let mut tn = f32x4::ZERO;
         let mut tf = f32x4::splat(tmax);
         for a in 0..3 {
-            let t0 = (n.b[self.near[a]][a] - self.os[a]) * self.inv[a];
-            let t1 = (n.b[1 - self.near[a]][a] - self.os[a]) * self.inv[a];
-            tn = tn.fast_max(t0);
-            tf = tf.fast_min(t1);
+            let t0 = (n.b[0][a] - self.os[a]) * self.inv[a];
+            let t1 = (n.b[1][a] - self.os[a]) * self.inv[a];
+            tn = tn.fast_max(t0.fast_min(t1));
+            tf = tf.fast_min(t0.fast_max(t1));
         }
         tf *= f32x4::splat(1.0 + 2.0 * gamma(3));
-        (tn.simd_le(tf).to_bitmask(), tn.to_array())
+        (tn.simd_le(tf).to_bitmask() & n.valid, tn.to_array())
     }
 
     /// Watertight test of four triangles; returns the lane mask of hits in
@@ -334,6 +336,7 @@ impl Bvh4 {
                 b[1][a][lane] = bb.max[a];
             }
             out.child[lane] = self.collapse(b2, k, shapes, level + 1, depth);
+            out.valid |= 1 << lane;
         }
         out.b = b.map(|axes| axes.map(f32x4::new));
         self.nodes[idx] = out;
