@@ -129,6 +129,31 @@ fn mean(v: &[f32]) -> f32 {
 }
 
 impl Bsdf {
+    /// Extend every spectrum to `n` bands (`n` ≥ the grid length) so the
+    /// integrator's band loops run over a multiple of the SIMD width without
+    /// a scalar tail. Reflectances pad with 0; indices of refraction and
+    /// extinction with their last band (finite, never used: the path's
+    /// throughput is 0 in the padding bands).
+    pub fn pad_bands(&mut self, n: usize) {
+        let pad_last = |v: &mut Vec<f32>| {
+            let last = v.last().copied().unwrap_or(1.0);
+            v.resize(n.max(v.len()), last);
+        };
+        match self {
+            Bsdf::Diffuse { r } | Bsdf::Mirror { r } => r.resize(n.max(r.len()), 0.0),
+            Bsdf::DiffuseSpecular { kd, ks, .. } => {
+                kd.resize(n.max(kd.len()), 0.0);
+                ks.resize(n.max(ks.len()), 0.0);
+            }
+            Bsdf::Dielectric { eta, .. } => pad_last(eta),
+            Bsdf::Conductor { eta, k, .. } => {
+                pad_last(eta);
+                pad_last(k);
+            }
+            Bsdf::Black => {}
+        }
+    }
+
     pub fn diffuse_specular(kd: Vec<f32>, ks: Vec<f32>, roughness: f32) -> Self {
         let md = mean(&kd).max(0.0);
         let ms = mean(&ks).max(0.0);

@@ -126,7 +126,7 @@ pub fn render_world(
 
     let work = |((((row, irr), se), lab), dep): RowSlices| -> u64 {
         let py = roi.y + row as u32;
-        let mut sc = Scratch::new(nb);
+        let mut sc = Scratch::new(world.bands_padded);
         let mut acc = vec![0.0f64; nb * batches];
         let mut counts = vec![0u32; batches];
         let mut cells: Vec<u32> = Vec::new();
@@ -186,7 +186,12 @@ pub fn render_world(
                             .iter_mut()
                             .enumerate()
                             .for_each(|(j, x)| *x = if j == b { nb as f32 } else { 0.0 }),
-                        None => sc.beta.iter_mut().for_each(|x| *x = 1.0),
+                        // Padding bands (≥ nb) carry no throughput.
+                        None => sc
+                            .beta
+                            .iter_mut()
+                            .enumerate()
+                            .for_each(|(j, x)| *x = if j < nb { 1.0 } else { 0.0 }),
                     }
                     trace(world, o, d, s.max_bounces, hero, &mut rng, &mut sc);
                     if sc.l.iter().any(|x| !x.is_finite()) {

@@ -86,9 +86,16 @@ pub struct World {
     pub center: Vec3,
     pub radius: f32,
     pub bands: usize,
+    /// Length of every band vector in the world (`bands` rounded up to a
+    /// multiple of `BAND_PAD`; the extra bands are zero in emission and
+    /// reflectance, and the integrator keeps their throughput at 0).
+    pub bands_padded: usize,
     /// A dielectric with wavelength-dependent ior is present.
     pub dispersive: bool,
 }
+
+/// Band vectors are padded to a multiple of this (two SSE registers).
+pub const BAND_PAD: usize = 8;
 
 fn resample(s: &Spectrum, grid: &WavelengthGrid, what: &str) -> Result<Vec<f32>> {
     let v = s
@@ -419,6 +426,20 @@ impl World {
         if let Some(l) = light_cdf.last_mut() {
             *l = 1.0;
         }
+        // Pad every band vector (after all means above are taken).
+        let nbp = nb.next_multiple_of(BAND_PAD);
+        for b in &mut bsdfs {
+            b.pad_bands(nbp);
+        }
+        for l in &mut lights {
+            let v = match l {
+                LightKind::Area { le, .. } => le,
+                LightKind::Point { i, .. } | LightKind::Spot { i, .. } => i,
+                LightKind::Distant { e, .. } => e,
+                LightKind::Infinite { l } => l,
+            };
+            v.resize(nbp, 0.0);
+        }
         let tri_ng = shapes
             .iter()
             .map(|s| match *s {
@@ -439,6 +460,7 @@ impl World {
             center,
             radius,
             bands: nb,
+            bands_padded: nbp,
             dispersive,
         })
     }
