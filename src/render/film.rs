@@ -129,6 +129,8 @@ pub fn render_world(
         let mut sc = Scratch::new(world.bands_padded);
         let mut acc = vec![0.0f64; nb * batches];
         let mut counts = vec![0u32; batches];
+        let mut mean_px = vec![0.0f64; nb];
+        let mut ss_px = vec![0.0f64; nb];
         let mut cells: Vec<u32> = Vec::new();
         let mut nan = 0u64;
         for ix in 0..roi.w as usize {
@@ -187,11 +189,10 @@ pub fn render_world(
                             .enumerate()
                             .for_each(|(j, x)| *x = if j == b { nb as f32 } else { 0.0 }),
                         // Padding bands (≥ nb) carry no throughput.
-                        None => sc
-                            .beta
-                            .iter_mut()
-                            .enumerate()
-                            .for_each(|(j, x)| *x = if j < nb { 1.0 } else { 0.0 }),
+                        None => {
+                            sc.beta[..nb].fill(1.0);
+                            sc.beta[nb..].fill(0.0);
+                        }
                     }
                     trace(world, o, d, s.max_bounces, hero, &mut rng, &mut sc);
                     if sc.l.iter().any(|x| !x.is_finite()) {
@@ -204,20 +205,32 @@ pub fn render_world(
                     }
                 }
             }
-            // Mean and standard error from the batch means.
+            // Mean and standard error from the batch means. Totals add the
+            // batches in order 0, 1, … for every band.
             let n = s.spp as f64;
-            for b in 0..nb {
-                let total: f64 = (0..batches).map(|k| acc[k * nb + b]).sum();
-                let mean = total / n;
-                irr[ix * nb + b] = mean as f32;
-                if batches > 1 {
-                    let mut ss = 0.0;
-                    for k in 0..batches {
-                        let m = acc[k * nb + b] / counts[k].max(1) as f64;
-                        ss += (m - mean) * (m - mean);
+            let irr_px = &mut irr[ix * nb..(ix + 1) * nb];
+            mean_px.fill(0.0);
+            for a in acc.chunks_exact(nb) {
+                for (t, &x) in mean_px.iter_mut().zip(a) {
+                    *t += x;
+                }
+            }
+            for (m, o) in mean_px.iter_mut().zip(irr_px.iter_mut()) {
+                *m /= n;
+                *o = *m as f32;
+            }
+            if batches > 1 {
+                ss_px.fill(0.0);
+                for (a, &c) in acc.chunks_exact(nb).zip(&counts) {
+                    let c = c.max(1) as f64;
+                    for ((q, &x), &mean) in ss_px.iter_mut().zip(a).zip(mean_px.iter()) {
+                        let m = x / c;
+                        *q += (m - mean) * (m - mean);
                     }
-                    se[ix * nb + b] =
-                        (ss / (batches as f64 * (batches as f64 - 1.0))).sqrt() as f32;
+                }
+                let denom = batches as f64 * (batches as f64 - 1.0);
+                for (o, &q) in se[ix * nb..(ix + 1) * nb].iter_mut().zip(ss_px.iter()) {
+                    *o = (q / denom).sqrt() as f32;
                 }
             }
         }
