@@ -40,7 +40,9 @@ fn imx363_has_table_one_numbers() {
 fn generic_sensor_parses() {
     let c = SensorConfig::load(&root().join("sensors/generic.kdl")).unwrap();
     assert_eq!(c.bit_depth, 12);
-    assert!(matches!(c.exposure, Exposure::Auto { level } if (level - 0.95).abs() < 1e-12));
+    assert!(
+        matches!(c.exposure, Exposure::Auto { level, percentile } if (level - 0.95).abs() < 1e-12 && percentile == 99.9)
+    );
     assert!((c.conversion_gain_v_per_e() - 100e-6).abs() < 1e-15);
 }
 

@@ -194,7 +194,8 @@ fn relative_illumination_map_is_applied_per_pixel() {
     }
 }
 
-/// Auto-exposure sets the brightest pixel's mean signal to the level × full well.
+/// Auto-exposure at percentile 100 (ISETCam's rule) sets the brightest pixel's
+/// mean signal to the level × full well.
 #[test]
 fn auto_exposure_targets_the_level() {
     let grid = WavelengthGrid::new(550.0, 550.0, 10.0).unwrap();
@@ -202,7 +203,10 @@ fn auto_exposure_targets_the_level() {
     cfg.well_capacity_e = 6000.0;
     cfg.cols = Some(16);
     cfg.rows = Some(16);
-    cfg.exposure = Exposure::Auto { level: 0.95 };
+    cfg.exposure = Exposure::Auto {
+        level: 0.95,
+        percentile: 100.0,
+    };
     let mut oi = OpticalImage::new(16, 16, Rect::new(0, 0, 16, 16), 1.4e-6, grid);
     for (i, v) in oi.irradiance.iter_mut().enumerate() {
         *v = 0.001 * (1 + i % 7) as f32;
@@ -224,6 +228,36 @@ fn auto_exposure_targets_the_level() {
             .to_string()
             .contains("black")
     );
+}
+
+/// The default auto-exposure (99.9th percentile) is not set by a few Monte Carlo
+/// fireflies: 4 of 10 000 pixels 1000× brighter than the rest leave the uniform
+/// pixels at level × full well (nearest rank 9990 of 10 000 is a uniform pixel),
+/// whereas percentile 100 exposes for the fireflies and leaves the scene at
+/// 1/1000 of that.
+#[test]
+fn auto_exposure_ignores_fireflies() {
+    let grid = WavelengthGrid::new(550.0, 550.0, 10.0).unwrap();
+    let mut cfg = ideal_mono();
+    cfg.well_capacity_e = 6000.0;
+    cfg.cols = Some(100);
+    cfg.rows = Some(100);
+    cfg.exposure = Exposure::auto_default();
+    let mut oi = OpticalImage::new(100, 100, Rect::new(0, 0, 100, 100), 1.4e-6, grid);
+    oi.irradiance.iter_mut().for_each(|v| *v = 0.001);
+    for i in [17, 2024, 5555, 9876] {
+        oi.irradiance[i] = 1.0;
+    }
+    let f = simulate_frame(&cfg, &oi, 1).unwrap();
+    let bulk = f.mean_electrons[0] as f64;
+    assert!((bulk / (0.95 * 6000.0) - 1.0).abs() < 1e-5, "{bulk}");
+    cfg.exposure = Exposure::Auto {
+        level: 0.95,
+        percentile: 100.0,
+    };
+    let f = simulate_frame(&cfg, &oi, 1).unwrap();
+    let bulk = f.mean_electrons[0] as f64;
+    assert!((bulk / (0.95 * 6.0) - 1.0).abs() < 1e-4, "{bulk}");
 }
 
 #[test]

@@ -33,11 +33,31 @@ pub enum ConversionGain {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Exposure {
     Seconds(f64),
-    /// Auto-exposure: the brightest pixel's mean signal reaches `level` × full well
-    /// (ISETCam's default auto-exposure targets 0.95 of the voltage swing).
+    /// Auto-exposure: the `percentile`-th percentile (nearest rank) of the pixels'
+    /// mean signal reaches `level` × full well. ISETCam's default auto-exposure
+    /// targets 0.95 of the voltage swing at the brightest pixel (percentile 100).
+    /// Decision: the default percentile is 99.9, so a few Monte Carlo outliers
+    /// ("fireflies") of a path-traced optical image do not set the exposure; an
+    /// image with fewer than 1000 pixels still exposes for its brightest pixel.
+    /// `auto-exposure-percentile 100` restores ISETCam's rule exactly.
     Auto {
         level: f64,
+        percentile: f64,
     },
+}
+
+/// Default auto-exposure level (fraction of full well) and percentile.
+pub const AUTO_EXPOSURE_LEVEL: f64 = 0.95;
+pub const AUTO_EXPOSURE_PERCENTILE: f64 = 99.9;
+
+impl Exposure {
+    /// `exposure-s "auto"` without further settings.
+    pub fn auto_default() -> Self {
+        Exposure::Auto {
+            level: AUTO_EXPOSURE_LEVEL,
+            percentile: AUTO_EXPOSURE_PERCENTILE,
+        }
+    }
 }
 
 /// Pixel/microlens relative illumination applied at the sensor (issue 5 item 4),
@@ -202,6 +222,7 @@ pub const SCALAR_NAMES: &[&str] = &[
     "bit-depth",
     "exposure-s",
     "auto-exposure-level",
+    "auto-exposure-percentile",
     "read-noise-mv",
     "reset-noise-mv",
     "dsnu-mv",
@@ -464,13 +485,10 @@ impl SensorConfig {
             "bit-depth" => self.bit_depth = integer(name, v, 1.0, 16.0)? as u32,
             "exposure-s" => {
                 self.exposure = match v {
-                    Value::String(s) if s == "auto" => {
-                        let level = match self.exposure {
-                            Exposure::Auto { level } => level,
-                            _ => 0.95,
-                        };
-                        Exposure::Auto { level }
-                    }
+                    Value::String(s) if s == "auto" => match self.exposure {
+                        a @ Exposure::Auto { .. } => a,
+                        _ => Exposure::auto_default(),
+                    },
                     Value::String(s) => {
                         return Err(format!(
                             "'exposure-s' expects seconds or \"auto\", found \"{s}\""
@@ -486,10 +504,29 @@ impl SensorConfig {
                         "'auto-exposure-level' is a fraction of full well in (0, 1], found {x}"
                     ));
                 }
-                if let Exposure::Auto { level } = &mut self.exposure {
+                if let Exposure::Auto { level, .. } = &mut self.exposure {
                     *level = x;
                 } else {
-                    self.exposure = Exposure::Auto { level: x };
+                    self.exposure = Exposure::Auto {
+                        level: x,
+                        percentile: AUTO_EXPOSURE_PERCENTILE,
+                    };
+                }
+            }
+            "auto-exposure-percentile" => {
+                let x = positive(name, v)?;
+                if x > 100.0 {
+                    return Err(format!(
+                        "'auto-exposure-percentile' is a percentile in (0, 100], found {x}"
+                    ));
+                }
+                if let Exposure::Auto { percentile, .. } = &mut self.exposure {
+                    *percentile = x;
+                } else {
+                    self.exposure = Exposure::Auto {
+                        level: AUTO_EXPOSURE_LEVEL,
+                        percentile: x,
+                    };
                 }
             }
             "read-noise-mv" => self.read_noise_v = nonneg(name, v)? * mv,
@@ -587,9 +624,10 @@ impl SensorConfig {
         p.set("bit-depth", n(self.bit_depth as f64));
         match self.exposure {
             Exposure::Seconds(t) => p.set("exposure-s", n(t)),
-            Exposure::Auto { level } => {
+            Exposure::Auto { level, percentile } => {
                 p.set("exposure-s", Value::String("auto".into()));
                 p.set("auto-exposure-level", n(level));
+                p.set("auto-exposure-percentile", n(percentile));
             }
         }
         p.set("read-noise-mv", n(self.read_noise_v * 1e3));
@@ -1183,6 +1221,18 @@ mod tests {
                 .contains("did you mean")
         );
         assert!(parse("exposure-s \"later\"\n").is_err());
+        let e = parse("exposure-s \"auto\"\nauto-exposure-percentile 150\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("(0, 100]"), "{e}");
+        let c = parse("exposure-s \"auto\"\nauto-exposure-percentile 100\n").unwrap();
+        assert_eq!(
+            c.exposure,
+            Exposure::Auto {
+                level: 0.95,
+                percentile: 100.0
+            }
+        );
         assert!(
             parse("garbage {{{")
                 .unwrap_err()

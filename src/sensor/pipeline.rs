@@ -384,12 +384,26 @@ pub fn flat_rate_e_per_s(
         .collect()
 }
 
+/// The `p`-th percentile (0 < p ≤ 100) of `v` by nearest rank: the value
+/// at rank ⌈p/100 · n⌉ of the sorted values (p = 100 is the maximum).
+/// Non-finite values are ignored; an empty input gives 0.
+fn percentile_nearest_rank(v: &[f32], p: f64) -> f64 {
+    let mut x: Vec<f32> = v.iter().copied().filter(|a| a.is_finite()).collect();
+    if x.is_empty() {
+        return 0.0;
+    }
+    let n = x.len();
+    let rank = ((p / 100.0 * n as f64).ceil() as usize).clamp(1, n);
+    let (_, kth, _) = x.select_nth_unstable_by(rank - 1, f32::total_cmp);
+    *kth as f64
+}
+
 /// The exposure time the config asks for, given the pass-1 signal rates.
 pub fn resolve_exposure_s(cfg: &SensorConfig, rate_e_per_s: &[f32]) -> Result<f64> {
     match cfg.exposure {
         Exposure::Seconds(t) => Ok(t),
-        Exposure::Auto { level } => {
-            let max = rate_e_per_s.iter().fold(0f32, |a, &b| a.max(b)) as f64;
+        Exposure::Auto { level, percentile } => {
+            let max = percentile_nearest_rank(rate_e_per_s, percentile);
             if max <= 0.0 {
                 return Err(Error::invalid(
                     "auto-exposure: the optical image is black (no signal to expose for)",
