@@ -10,6 +10,17 @@
 //! unweighted least squares of session 1 on the same traced data, and at
 //! degree 5 the other pass/no-pass representations (the paper's enclosing
 //! ellipses; vignetting circles). ESF positions: every Zemax position.
+//! `rtf-degreeN-onaxis-only` fits the same monomials (same planes and
+//! ellipses) to only the rays the on-axis ESF traces: the reach of the
+//! polynomial form on axis, evidence for which lines are feasible at all.
+//!
+//! Film-plane residuals (columns `film_residual_rms_um`,
+//! `film_residual_max_um`; `analysis::film_residuals`): film at infinity
+//! focus, the RI film heights, a 24×24 pupil grid; every ray the model's
+//! camera emits into the scene is traced back through the prescription to
+//! the film plane, and its distance from the film point that emitted it is
+//! the residual (rays the prescription blocks on the way back are left
+//! out). The prescription row is its own reverse trace (0 to rounding).
 //!
 //! Set-up: RI at infinity focus (paraxial back focal distance), 0–95 % of the
 //! largest film radius that receives light. ESF on axis, object at the first
@@ -340,12 +351,17 @@ fn optics_fitted_rtfs_match_prescriptions_and_zemax() {
     // Acceptance, default fit (aberration-relative weights, area-matched
     // ellipses): RI within 0.01 at every degree 3–7.
     // ESF ≤ 1 %: double Gauss from degree 5, Tessar from degree 6. Below
-    // that the polynomial cannot carry the aberrations over the whole field
-    // (table: the unweighted fit gives 2.5 % / 10 % at degree 3; weighting
+    // that one global polynomial cannot serve the axis and the rest of the
+    // field at once: fitted to the on-axis rays alone the same form reaches
+    // ≤ 0.4 % at every degree (rows `-onaxis-only`, asserted below), and
+    // every fitting variant that lowered the low-degree on-axis lines
+    // raised the field-wide film residual (fit.rs docs, measured table).
+    // Table: the unweighted fit gives 2.5 % / 10 % at degree 3; weighting
     // by each field's own aberration brings that to 1.7 % / 0.9 %, but the
     // Tessar's 0.9 % at degree 3 is not robust — 2.1 % with 48 instead of
-    // 24 field radii — and degrees 4–5 stay at 1.2–1.7 %). Those degrees
-    // are held to 2.5 % so a regression shows.
+    // 24 field radii, 4.8 % with half the weight on the r = 0 radius — and
+    // degrees 4–5 stay at 1.2–1.7 %. Those degrees are held to 2.5 % so a
+    // regression shows.
     let esf_limit = |lens: &str, d: usize| match (lens, d) {
         ("dgauss28deg", 5..) | ("tessar", 6..) => 0.01,
         _ => 0.025,
@@ -369,10 +385,36 @@ fn optics_fitted_rtfs_match_prescriptions_and_zemax() {
             r.esf_rmse_vs_prescription
         );
     }
+    // Film-plane residuals of the default fit (regression guards at about
+    // 1.5× the measured RMS: double Gauss 17.6/4.2/1.15/0.38/0.10 µm,
+    // Tessar 226/250/135/69/47 µm at degrees 3–7; the Tessar's outer field,
+    // 42° and strongly vignetted, dominates).
+    let film_limit = |lens: &str, d: usize| match (lens, d) {
+        ("dgauss28deg", 3) => 26.0,
+        ("dgauss28deg", 4) => 6.5,
+        ("dgauss28deg", 5) => 1.8,
+        ("dgauss28deg", _) => 0.6,
+        ("tessar", 3..=4) => 380.0,
+        ("tessar", 5) => 200.0,
+        _ => 105.0,
+    };
+    for (r, d) in rows.iter().filter_map(|r| {
+        let d = r.model.strip_prefix("rtf-degree")?;
+        d.parse::<usize>().ok().map(|d| (r, d))
+    }) {
+        assert!(
+            r.film_rms_um.is_finite() && r.film_rms_um <= film_limit(r.lens, d),
+            "{} {}: film residual RMS {} µm",
+            r.lens,
+            r.model,
+            r.film_rms_um
+        );
+    }
     // Feasibility: fitted to only the rays the on-axis ESF traces, every
     // degree 3–7 of this polynomial form reaches the 1 % line (measured
     // 0.39/0.30/0.31/0.31/0.31 % double Gauss, 0.20/0.18/0.03/0.01/0.06 %
-    // Tessar; the double Gauss floor is the quadrature's). So the gap of the
+    // Tessar; the double Gauss floor is the quadrature's; limit 1 %, the
+    // acceptance line). So the gap of the
     // default fit at low degree is the trade-off between the axis and the
     // rest of the field (fit.rs docs), not the reach of the form.
     for r in rows.iter().filter(|r| r.model.ends_with("-onaxis-only")) {
