@@ -92,9 +92,10 @@
 //!     rays; each output is fitted separately with the same weights, so
 //!     any fixed linear combination of outputs has the same least-squares
 //!     optimum, and the slopes differ from the cosines only through outdz).
-//!   So the default is unchanged; lines above 1 % at degrees 3–5 are a
-//!   property of a single global polynomial over the whole field, which the
-//!   test records rather than tunes away.
+//!
+//! So the default is unchanged; lines above 1 % at degrees 3–5 are a
+//! property of a single global polynomial over the whole field, which the
+//! test records rather than tunes away.
 //!
 //! Pass/no-pass: the pass plane is the paraxial exit pupil (its distance
 //! from the input plane; the input-plane offset if that is not > 5 % of f).
