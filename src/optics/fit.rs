@@ -92,6 +92,19 @@
 //!     rays; each output is fitted separately with the same weights, so
 //!     any fixed linear combination of outputs has the same least-squares
 //!     optimum, and the slopes differ from the cosines only through outdz).
+//!   - per field, extra least-squares rows asking the residual to have
+//!     zero mean and zero first moments over the pupil (the coherent
+//!     shift/focus part an image sees most), weight λ = 1/3/10: worse
+//!     (double Gauss degree 3 2.1/10/8 %, Tessar degree 4 2.3/6.2/11 %).
+//!
+//! The Tessar's degree 5 (1.68 %) being worse than its degree 3 (0.90 %)
+//! is the same effect seen from the other side: its r = 0 RMS direction
+//! error relative to σ is *lower* at degree 5 (0.72× that of degree 3;
+//! degree 4 1.20×), yet the on-axis ESF error is higher. The on-axis line
+//! is not a monotone function of the axis's share of the objective: it
+//! depends on how the error is shaped over the near-axis rays (film points
+//! out to ±0.5 mm, input radii up to ≈ 0.8 mm, between the sampled radii 0
+//! and 3.75 mm), which the global fit leaves to chance at low degree.
 //!
 //! So the default is unchanged; lines above 1 % at degrees 3–5 are a
 //! property of a single global polynomial over the whole field, which the
