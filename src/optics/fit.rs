@@ -53,10 +53,10 @@
 //!   planes and ellipses) give, degrees 3/4/5/6/7, double Gauss 0.39/0.30/
 //!   0.31/0.31/0.31 % (the floor is the 40×40 ESF quadrature's) and Tessar
 //!   0.20/0.18/0.03/0.01/0.06 % (report rows `rtf-degreeN-onaxis-only`).
-//!   Near the axis the input plane sits 2 % of the back focal distance in
-//!   front of focus, so the rays of one film point spread over r ≲ 0.3 mm
-//!   and the r-terms act as extra pupil terms. Those fits are useless
-//!   elsewhere (film residuals of mm, RI errors up to 0.99).
+//!   The rays of one film point spread over a range of input radii (up to
+//!   1.9 / 1.3 mm here), so the r-terms act as extra pupil terms. Those
+//!   fits are useless elsewhere (film residuals of mm, RI errors up to
+//!   0.99).
 //! - It is the trade between the axis and the rest of the field. Every
 //!   variant that lowered the low-degree on-axis lines raised the
 //!   field-wide film residual (`film_residuals`, RMS over 0–95 % of the
@@ -102,9 +102,12 @@
 //! error relative to σ is *lower* at degree 5 (0.72× that of degree 3;
 //! degree 4 1.20×), yet the on-axis ESF error is higher. The on-axis line
 //! is not a monotone function of the axis's share of the objective: it
-//! depends on how the error is shaped over the near-axis rays (film points
-//! out to ±0.5 mm, input radii up to ≈ 0.8 mm, between the sampled radii 0
-//! and 3.75 mm), which the global fit leaves to chance at low degree.
+//! depends on how the error is shaped over the near-axis rays: with the
+//! film at the ESF's 1.3 m focus, 10.1 mm behind the input plane, the
+//! on-axis ESF's rays cross the input plane at radii up to 1.3 mm (double
+//! Gauss: 11.4 mm, 1.9 mm), between the sampled radii 0 and 3.75 mm
+//! (1.82 mm), and the low-degree global fit leaves their error shape to
+//! chance.
 //!
 //! So the default is unchanged; lines above 1 % at degrees 3–5 are a
 //! property of a single global polynomial over the whole field, which the
