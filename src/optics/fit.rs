@@ -79,6 +79,14 @@
 //!     1.59/0.38 | 4.4/2.2/3.3 — the low-degree on-axis lines follow the
 //!     weight the r = 0 radius happens to get (halving it, the trapezoid
 //!     end weight, turns Tessar degree 3 from 0.9 % into 4.8 %);
+//!   - the number of uniform radii, 12/16/24/32/48/96: double Gauss
+//!     degree 3 2.4/2.0/1.7/1.6/1.5/1.4 %, degree 4 1.1/1.2/1.3/1.3/1.4/
+//!     1.5 %; Tessar degree 3 0.8/1.6/0.9/0.6/2.1/3.7 %, degree 4 0.7/1.0/
+//!     1.2/1.2/1.2/1.1 %, degree 5 0.2/0.9/1.7/2.0/2.3/2.6 %, while the
+//!     field-wide film RMS moves by < 10 % (Tessar degree 5: 125/129/135/
+//!     139/144/149 µm). The low-degree on-axis lines are not a stable
+//!     property of the fit: they swing by 10× with a sampling detail that
+//!     changes the whole-field quality little;
 //!   - the r = 0 radius weighted ×16: 2.23/0.46/0.36 [20.3/5.0/1.3] |
 //!     0.27/0.52/0.07 [219/258/146]; ×256 still leaves double Gauss
 //!     degree 3 at 1.61 %;
