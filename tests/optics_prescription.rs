@@ -304,3 +304,51 @@ fn optics_zemax_samples_with_stop_at_vertex_trace() {
         }
     }
 }
+
+/// The reversed prescription traces a scene-side ray back along the path it
+/// came: random film rays through both Zemax samples return to their film
+/// point (the path is reversible; only rounding remains), and the reverse
+/// of the reverse is the lens itself.
+#[test]
+fn optics_reversed_prescription_retraces_rays() {
+    for file in [
+        "lenses/prescriptions/dgauss.28deg-zemax.json",
+        "lenses/prescriptions/tessar-zemax.json",
+    ] {
+        let lens = Prescription::load(Path::new(file)).unwrap();
+        let rev = lens.reversed().unwrap();
+        // (up to the rear surface's distance to the film, which the trace
+        // does not use and the reversal cannot know)
+        let mut same = lens.surfaces.clone();
+        same.last_mut().unwrap().thickness_mm = 0.0;
+        assert_eq!(rev.reversed().unwrap().surfaces, same);
+        let track = lens.total_track_mm();
+        let bfd = lens.paraxial(550.0).unwrap().back_focal_distance_mm;
+        let mut rng = Rng(7);
+        let mut n = 0;
+        for _ in 0..2000 {
+            let o = DVec3::new(0.0, 20.0 * rng.next(), -bfd);
+            let d = DVec3::new(0.4 * rng.next() - 0.2, 0.4 * rng.next() - 0.2, 1.0);
+            let Ok((p, dir)) = lens.trace_to_scene(o, d, 550.0) else {
+                continue;
+            };
+            // Start well in front of the lens, travelling back.
+            let p = p + dir * 20.0;
+            let (q, dq) = rev
+                .trace_to_scene(
+                    DVec3::new(p.x, p.y, track - p.z),
+                    DVec3::new(-dir.x, -dir.y, dir.z),
+                    550.0,
+                )
+                .unwrap();
+            let t = (-bfd - (track - q.z)) / -dq.z;
+            let back = DVec2::new(q.x + dq.x * t, q.y + dq.y * t);
+            assert!(
+                (back - DVec2::new(o.x, o.y)).length() < 1e-9,
+                "{file}: {back}"
+            );
+            n += 1;
+        }
+        assert!(n > 200, "{file}: only {n} rays passed");
+    }
+}

@@ -10,6 +10,17 @@
 //! unweighted least squares of session 1 on the same traced data, and at
 //! degree 5 the other pass/no-pass representations (the paper's enclosing
 //! ellipses; vignetting circles). ESF positions: every Zemax position.
+//! `rtf-degreeN-onaxis-only` fits the same monomials (same planes and
+//! ellipses) to only the rays the on-axis ESF traces: the reach of the
+//! polynomial form on axis, evidence for which lines are feasible at all.
+//!
+//! Film-plane residuals (columns `film_residual_rms_um`,
+//! `film_residual_max_um`; `analysis::film_residuals`): film at infinity
+//! focus, the RI film heights, a 24×24 pupil grid; every ray the model's
+//! camera emits into the scene is traced back through the prescription to
+//! the film plane, and its distance from the film point that emitted it is
+//! the residual (rays the prescription blocks on the way back are left
+//! out). The prescription row is its own reverse trace (0 to rounding).
 //!
 //! Set-up: RI at infinity focus (paraxial back focal distance), 0–95 % of the
 //! largest film radius that receives light. ESF on axis, object at the first
@@ -19,10 +30,13 @@
 //! error (< 0.3 % of a value) is well inside the tolerances.
 
 use camsim::optics::Camera;
-use camsim::optics::analysis::{edge_spread, relative_illumination};
-use camsim::optics::fit::{FitOptions, PassMethod, Weighting, fit_rtf, fit_rtf_degrees};
+use camsim::optics::analysis::{edge_spread, film_residuals, relative_illumination};
+use camsim::optics::fit::{
+    FitOptions, PassMethod, Sample, Weighting, fit_polys, fit_rtf, fit_rtf_degrees,
+};
 use camsim::optics::prescription::{Prescription, PrescriptionCamera};
 use camsim::optics::rtf::{Rtf, RtfCamera};
+use glam::DVec3;
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -88,6 +102,51 @@ struct Row {
     ri_err_vs_zemax: f64,
     esf_rmse_vs_zemax: f64,
     cond: f64,
+    film_rms_um: f64,
+    film_max_um: f64,
+}
+
+/// The rays the on-axis ESF traces through `rtf` (film at `film_mm`): every
+/// ESF position × an n×n grid over the RTF camera's pupil sampling box,
+/// each put in the fit's frame (input point rotated onto +y) and traced
+/// through the prescription to the RTF's output plane.
+fn on_axis_esf_samples(
+    lens: &Prescription,
+    rtf: &Rtf,
+    film_mm: f64,
+    pos_um: &[f64],
+) -> Vec<Sample> {
+    let n = 20;
+    let cam = RtfCamera::new(rtf.clone(), film_mm).unwrap();
+    let w = &rtf.waves[0];
+    let z_in_cam = cam.input_plane_z_mm();
+    let h = z_in_cam + w.pass.plane_distance_mm();
+    let z_in = -rtf.plane_offset_input_mm;
+    let z_out = lens.total_track_mm() + rtf.plane_offset_output_mm;
+    let mut v = Vec::new();
+    for &x_um in pos_um {
+        let r_f = (x_um * 1e-3).abs();
+        let b = cam.sampling_box(w, r_f).unwrap();
+        for i in 0..n {
+            for j in 0..n {
+                let qx = b[0] + (i as f64 + 0.5) / n as f64 * (b[1] - b[0]);
+                let qy = b[2] + (j as f64 + 0.5) / n as f64 * (b[3] - b[2]);
+                let d = DVec3::new(qx, qy - r_f, h).normalize();
+                let t = z_in_cam / d.z;
+                // Input point (d.x·t, r_f + d.y·t): rotate it onto +y.
+                let (px, py) = (d.x * t, r_f + d.y * t);
+                let r = (px * px + py * py).sqrt();
+                let (sn, cs) = (px / r, py / r);
+                let dr = DVec3::new(d.x * cs - d.y * sn, d.x * sn + d.y * cs, d.z);
+                let Ok((p, dir)) = lens.trace_to_scene(DVec3::new(0.0, r, z_in), dr, 550.0) else {
+                    continue;
+                };
+                let q = p + dir * ((z_out - p.z) / dir.z);
+                v.push(([r, dr.x, dr.y], [q.x, q.y, dir.x, dir.y, dir.z]));
+            }
+        }
+    }
+    v
 }
 
 fn evaluate(case: &Case, rows: &mut Vec<Row>) {
@@ -113,6 +172,12 @@ fn evaluate(case: &Case, rows: &mut Vec<Row>) {
             .collect::<Vec<_>>()
     };
     let ri_p = ri_of(&presc_inf);
+    // Film-plane residuals: infinity focus, the RI film heights, 24×24 pupil
+    // grid (analysis::film_residuals). The prescription against itself
+    // checks the reverse trace (rounding only).
+    let film_of = |cam: &dyn Camera| film_residuals(cam, &lens, bfd, &heights, 550.0, 24).unwrap();
+    let film_p = film_of(&presc_inf);
+    assert!(film_p.max_um < 1e-3, "reverse trace: {film_p:?}");
     let esf_p = esf_of(&presc_esf);
     let zemax_esf_v: Vec<f64> = zemax_esf.iter().map(|p| p.1).collect();
     let ri_vs_zemax = |ri: &[f64]| {
@@ -131,10 +196,13 @@ fn evaluate(case: &Case, rows: &mut Vec<Row>) {
         ri_err_vs_zemax: ri_vs_zemax(&ri_p),
         esf_rmse_vs_zemax: rmse_norm(&esf_p, &zemax_esf_v),
         cond: f64::NAN,
+        film_rms_um: film_p.rms_um,
+        film_max_um: film_p.max_um,
     });
     let mut push_rtf = |model: String, rtf: &Rtf, cond: f64| {
         let ri_r = ri_of(&RtfCamera::new(rtf.clone(), bfd).unwrap());
         let esf_r = esf_of(&RtfCamera::new(rtf.clone(), film_esf).unwrap());
+        let film = film_of(&RtfCamera::new(rtf.clone(), bfd).unwrap());
         let ri_err = ri_r
             .iter()
             .zip(&ri_p)
@@ -148,15 +216,32 @@ fn evaluate(case: &Case, rows: &mut Vec<Row>) {
             ri_err_vs_zemax: ri_vs_zemax(&ri_r),
             esf_rmse_vs_zemax: rmse_norm(&esf_r, &zemax_esf_v),
             cond,
+            film_rms_um: film.rms_um,
+            film_max_um: film.max_um,
         });
     };
     // Default fit: aberration-relative weights, area-matched ellipses.
     let opts = FitOptions::default();
     let mut degree6 = None;
-    for (d, (rtf, rep)) in DEGREES
-        .iter()
-        .zip(fit_rtf_degrees(&lens, &[550.0], &DEGREES, &opts).unwrap())
-    {
+    let default_fits = fit_rtf_degrees(&lens, &[550.0], &DEGREES, &opts).unwrap();
+    // Reach of the polynomial form on axis: the same monomials fitted (same
+    // planes and pass ellipses) to ONLY the rays the on-axis ESF traces. If
+    // this exceeded 1 %, no polynomial of that degree could pass the line.
+    let onaxis = on_axis_esf_samples(&lens, &default_fits[0].0, film_esf, &pos);
+    let onaxis_w = vec![1.0; onaxis.len()];
+    let mut onaxis_rows = Vec::new();
+    for (&d, (base, _)) in DEGREES.iter().zip(&default_fits) {
+        let (mut outputs, rep) = fit_polys(&onaxis, &onaxis_w, d, 550.0, &lens.name).unwrap();
+        let mut rtf = base.clone();
+        outputs[2] = rtf.waves[0].outputs[2].take();
+        rtf.waves[0].outputs = outputs;
+        onaxis_rows.push((
+            format!("rtf-degree{d}-onaxis-only"),
+            rtf,
+            rep[0].condition_number,
+        ));
+    }
+    for (d, (rtf, rep)) in DEGREES.iter().zip(default_fits) {
         // The JSON round trip is what renders: write and read back.
         let back = Rtf::from_value(&rtf.to_json(), Path::new("fit.json")).unwrap();
         assert_eq!(back, rtf);
@@ -164,6 +249,9 @@ fn evaluate(case: &Case, rows: &mut Vec<Row>) {
         if *d == 6 {
             degree6 = Some(back);
         }
+    }
+    for (model, rtf, cond) in onaxis_rows {
+        push_rtf(model, &rtf, cond);
     }
     // Before (session 1): unweighted least squares, same data.
     let opts = FitOptions {
@@ -238,19 +326,21 @@ fn optics_fitted_rtfs_match_prescriptions_and_zemax() {
         evaluate(c, &mut rows);
     }
     let mut csv = String::from(
-        "lens,model,ri_max_abs_err_vs_prescription,esf_rmse_vs_prescription,ri_max_abs_err_vs_zemax,esf_rmse_vs_zemax,condition_number\n",
+        "lens,model,ri_max_abs_err_vs_prescription,esf_rmse_vs_prescription,ri_max_abs_err_vs_zemax,esf_rmse_vs_zemax,condition_number,film_residual_rms_um,film_residual_max_um\n",
     );
     for r in &rows {
         writeln!(
             csv,
-            "{},{},{:.5},{:.5},{:.5},{:.5},{:.3e}",
+            "{},{},{:.5},{:.5},{:.5},{:.5},{:.3e},{:.3},{:.3}",
             r.lens,
             r.model,
             r.ri_err_vs_prescription,
             r.esf_rmse_vs_prescription,
             r.ri_err_vs_zemax,
             r.esf_rmse_vs_zemax,
-            r.cond
+            r.cond,
+            r.film_rms_um,
+            r.film_max_um
         )
         .unwrap();
     }
@@ -261,12 +351,17 @@ fn optics_fitted_rtfs_match_prescriptions_and_zemax() {
     // Acceptance, default fit (aberration-relative weights, area-matched
     // ellipses): RI within 0.01 at every degree 3–7.
     // ESF ≤ 1 %: double Gauss from degree 5, Tessar from degree 6. Below
-    // that the polynomial cannot carry the aberrations over the whole field
-    // (table: the unweighted fit gives 2.5 % / 10 % at degree 3; weighting
+    // that one global polynomial cannot serve the axis and the rest of the
+    // field at once: fitted to the on-axis rays alone the same form reaches
+    // ≤ 0.4 % at every degree (rows `-onaxis-only`, asserted below), and
+    // every fitting variant that lowered the low-degree on-axis lines
+    // raised the field-wide film residual (fit.rs docs, measured table).
+    // Table: the unweighted fit gives 2.5 % / 10 % at degree 3; weighting
     // by each field's own aberration brings that to 1.7 % / 0.9 %, but the
     // Tessar's 0.9 % at degree 3 is not robust — 2.1 % with 48 instead of
-    // 24 field radii — and degrees 4–5 stay at 1.2–1.7 %). Those degrees
-    // are held to 2.5 % so a regression shows.
+    // 24 field radii, 4.8 % with half the weight on the r = 0 radius — and
+    // degrees 4–5 stay at 1.2–1.7 %. Those degrees are held to 2.5 % so a
+    // regression shows.
     let esf_limit = |lens: &str, d: usize| match (lens, d) {
         ("dgauss28deg", 5..) | ("tessar", 6..) => 0.01,
         _ => 0.025,
@@ -284,6 +379,47 @@ fn optics_fitted_rtfs_match_prescriptions_and_zemax() {
         );
         assert!(
             r.esf_rmse_vs_prescription <= esf_limit(r.lens, d),
+            "{} {}: ESF RMSE {}",
+            r.lens,
+            r.model,
+            r.esf_rmse_vs_prescription
+        );
+    }
+    // Film-plane residuals of the default fit (regression guards at about
+    // 1.5× the measured RMS: double Gauss 17.6/4.2/1.15/0.38/0.10 µm,
+    // Tessar 226/250/135/69/47 µm at degrees 3–7; the Tessar's outer field,
+    // 42° and strongly vignetted, dominates).
+    let film_limit = |lens: &str, d: usize| match (lens, d) {
+        ("dgauss28deg", 3) => 26.0,
+        ("dgauss28deg", 4) => 6.5,
+        ("dgauss28deg", 5) => 1.8,
+        ("dgauss28deg", _) => 0.6,
+        ("tessar", 3..=4) => 380.0,
+        ("tessar", 5) => 200.0,
+        _ => 105.0,
+    };
+    for (r, d) in rows.iter().filter_map(|r| {
+        let d = r.model.strip_prefix("rtf-degree")?;
+        d.parse::<usize>().ok().map(|d| (r, d))
+    }) {
+        assert!(
+            r.film_rms_um.is_finite() && r.film_rms_um <= film_limit(r.lens, d),
+            "{} {}: film residual RMS {} µm",
+            r.lens,
+            r.model,
+            r.film_rms_um
+        );
+    }
+    // Feasibility: fitted to only the rays the on-axis ESF traces, every
+    // degree 3–7 of this polynomial form reaches the 1 % line (measured
+    // 0.39/0.30/0.31/0.31/0.31 % double Gauss, 0.20/0.18/0.03/0.01/0.06 %
+    // Tessar; the double Gauss floor is the quadrature's; limit 1 %, the
+    // acceptance line). So the gap of the
+    // default fit at low degree is the trade-off between the axis and the
+    // rest of the field (fit.rs docs), not the reach of the form.
+    for r in rows.iter().filter(|r| r.model.ends_with("-onaxis-only")) {
+        assert!(
+            r.esf_rmse_vs_prescription <= 0.01,
             "{} {}: ESF RMSE {}",
             r.lens,
             r.model,

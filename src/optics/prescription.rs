@@ -503,6 +503,51 @@ impl Prescription {
         Ok(d)
     }
 
+    /// The same lens seen from the scene side: surfaces in reverse order,
+    /// radii negated, each medium moved to the other side of its surface.
+    /// Its lens frame is this one mirrored: z_rev = total track − z, with
+    /// direction z negated, so `reversed().trace_to_scene` traces a
+    /// scene-side ray back to the film. Needs air on the film side (the
+    /// forward trace starts there); otherwise `Error::NotSupported`.
+    pub fn reversed(&self) -> Result<Prescription> {
+        let n = self.surfaces.len();
+        let Some(last) = self.surfaces.last() else {
+            return Err(Error::Invalid(format!(
+                "lens '{}' has no surfaces",
+                self.name
+            )));
+        };
+        if last.ior.varies() || last.ior.at(550.0) != 1.0 {
+            return Err(Error::NotSupported(format!(
+                "lens '{}': reversing a lens whose film-side medium is not air",
+                self.name
+            )));
+        }
+        let surfaces = (0..n)
+            .rev()
+            .map(|k| {
+                let s = &self.surfaces[k];
+                let (thickness_mm, ior) = if k >= 1 {
+                    let before = &self.surfaces[k - 1];
+                    (before.thickness_mm, before.ior.clone())
+                } else {
+                    (0.0, Ior::Constant(1.0))
+                };
+                Surface {
+                    radius_mm: -s.radius_mm,
+                    thickness_mm,
+                    ior,
+                    semi_aperture_mm: s.semi_aperture_mm,
+                    is_stop: s.is_stop,
+                }
+            })
+            .collect();
+        Ok(Prescription {
+            name: format!("{} (reversed)", self.name),
+            surfaces,
+        })
+    }
+
     /// Sequential trace film → scene in the lens frame (mm). `d` need not be unit.
     pub fn trace_to_scene(
         &self,
