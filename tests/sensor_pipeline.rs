@@ -194,20 +194,28 @@ fn relative_illumination_map_is_applied_per_pixel() {
     }
 }
 
+/// An ideal n×n mono sensor with a 6000 e⁻ well, the given exposure, and a
+/// matching black 550 nm optical image.
+fn auto_setup(n: u32, exposure: Exposure) -> (SensorConfig, OpticalImage) {
+    let grid = WavelengthGrid::new(550.0, 550.0, 10.0).unwrap();
+    let mut cfg = ideal_mono();
+    cfg.well_capacity_e = 6000.0;
+    cfg.cols = Some(n);
+    cfg.rows = Some(n);
+    cfg.exposure = exposure;
+    let oi = OpticalImage::new(n, n, Rect::new(0, 0, n, n), 1.4e-6, grid);
+    (cfg, oi)
+}
+
 /// Auto-exposure at percentile 100 (ISETCam's rule) sets the brightest pixel's
 /// mean signal to the level × full well.
 #[test]
 fn auto_exposure_targets_the_level() {
-    let grid = WavelengthGrid::new(550.0, 550.0, 10.0).unwrap();
-    let mut cfg = ideal_mono();
-    cfg.well_capacity_e = 6000.0;
-    cfg.cols = Some(16);
-    cfg.rows = Some(16);
-    cfg.exposure = Exposure::Auto {
+    let isetcam = Exposure::Auto {
         level: 0.95,
         percentile: 100.0,
     };
-    let mut oi = OpticalImage::new(16, 16, Rect::new(0, 0, 16, 16), 1.4e-6, grid);
+    let (cfg, mut oi) = auto_setup(16, isetcam);
     for (i, v) in oi.irradiance.iter_mut().enumerate() {
         *v = 0.001 * (1 + i % 7) as f32;
     }
@@ -215,13 +223,7 @@ fn auto_exposure_targets_the_level() {
     let max = f.mean_electrons.iter().cloned().fold(0.0f32, f32::max) as f64;
     assert!((max / (0.95 * 6000.0) - 1.0).abs() < 1e-5, "{max}");
     assert!(f.image.exposure_s > 0.0);
-    let black = OpticalImage::new(
-        16,
-        16,
-        Rect::new(0, 0, 16, 16),
-        1.4e-6,
-        WavelengthGrid::new(550.0, 550.0, 10.0).unwrap(),
-    );
+    let (_, black) = auto_setup(16, isetcam);
     assert!(
         simulate(&cfg, &black, 1)
             .unwrap_err()
@@ -237,13 +239,7 @@ fn auto_exposure_targets_the_level() {
 /// 1/1000 of that.
 #[test]
 fn auto_exposure_ignores_fireflies() {
-    let grid = WavelengthGrid::new(550.0, 550.0, 10.0).unwrap();
-    let mut cfg = ideal_mono();
-    cfg.well_capacity_e = 6000.0;
-    cfg.cols = Some(100);
-    cfg.rows = Some(100);
-    cfg.exposure = Exposure::auto_default();
-    let mut oi = OpticalImage::new(100, 100, Rect::new(0, 0, 100, 100), 1.4e-6, grid);
+    let (mut cfg, mut oi) = auto_setup(100, Exposure::auto_default());
     oi.irradiance.iter_mut().for_each(|v| *v = 0.001);
     for i in [17, 2024, 5555, 9876] {
         oi.irradiance[i] = 1.0;

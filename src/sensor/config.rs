@@ -504,14 +504,7 @@ impl SensorConfig {
                         "'auto-exposure-level' is a fraction of full well in (0, 1], found {x}"
                     ));
                 }
-                if let Exposure::Auto { level, .. } = &mut self.exposure {
-                    *level = x;
-                } else {
-                    self.exposure = Exposure::Auto {
-                        level: x,
-                        percentile: AUTO_EXPOSURE_PERCENTILE,
-                    };
-                }
+                self.set_auto_exposure(Some(x), None);
             }
             "auto-exposure-percentile" => {
                 let x = positive(name, v)?;
@@ -520,14 +513,7 @@ impl SensorConfig {
                         "'auto-exposure-percentile' is a percentile in (0, 100], found {x}"
                     ));
                 }
-                if let Exposure::Auto { percentile, .. } = &mut self.exposure {
-                    *percentile = x;
-                } else {
-                    self.exposure = Exposure::Auto {
-                        level: AUTO_EXPOSURE_LEVEL,
-                        percentile: x,
-                    };
-                }
+                self.set_auto_exposure(None, Some(x));
             }
             "read-noise-mv" => self.read_noise_v = nonneg(name, v)? * mv,
             "reset-noise-mv" => self.reset_noise_v = nonneg(name, v)? * mv,
@@ -654,6 +640,19 @@ impl SensorConfig {
             p.set(k, Value::Bool(v));
         }
         p
+    }
+
+    /// Switch to auto-exposure (if not already) and set the given parts; the
+    /// others keep their current or default values.
+    fn set_auto_exposure(&mut self, level: Option<f64>, percentile: Option<f64>) {
+        let (l, p) = match self.exposure {
+            Exposure::Auto { level, percentile } => (level, percentile),
+            Exposure::Seconds(_) => (AUTO_EXPOSURE_LEVEL, AUTO_EXPOSURE_PERCENTILE),
+        };
+        self.exposure = Exposure::Auto {
+            level: level.unwrap_or(l),
+            percentile: percentile.unwrap_or(p),
+        };
     }
 
     /// Apply inline overrides (experiment `sensor "…" exposure-s=0.2`). Names are the
