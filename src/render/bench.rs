@@ -47,22 +47,20 @@
 //! which mirrors such a scene left–right; the bench writes Mitsuba's camera
 //! matrix out instead (see `mitsuba_cornell_box`).
 //!
-//! ## Measured (`bench/mitsuba_compare.sh`, 2 threads, load average ≈ 6–7)
+//! ## Measured (`bench/mitsuba_compare.sh`, 2 threads)
+//! Current figures (idle machine, 4 seeds, 32 spp) are in `render/mod.rs`:
+//! camsim 1.31× Mitsuba's paths/s; equal-time RMSE 0.84 (all pixels) and
+//! 0.944 (light transport). Method notes from the first runs (load ≈ 6–7):
 //! - Converged images agree: camsim 512 spp vs Mitsuba 1024 spp, mean Y
 //!   ratio 0.9999; 16×16-pixel block means differ by 0.47 % RMS (max 1.6 %),
 //!   which is their Monte Carlo noise; no systematic per-pixel difference.
-//! - Throughput at 32 spp (mean of 4 seeds): Mitsuba 3.9.1 `llvm_ad_spectral`
-//!   0.22 M paths/s wall (0.45 M per CPU-s), camsim 0.21 M (0.42 M per
-//!   CPU-s): ratio 0.93. Mitsuba must be timed to kernel completion
-//!   (`dr.sync_thread()`): timing `mi.render()` + `dr.eval()` alone times the
-//!   asynchronous launch and reports tens of M paths/s; the 3.4 M
-//!   paths/s is not reproducible with a synchronised timer on this machine.
-//! - Relative RMSE of Y, all pixels (4 seeds): equal spp (32) Mitsuba
-//!   20.3 %, camsim 21.1 % (×1.04 ± 0.05); equal time ×1.09 ± 0.05 (wall),
-//!   ×1.08 (CPU). ~85 % of that MSE is pixel-coverage noise on the emitter's
-//!   edge (identical for both, heavy-tailed: one image's RMSE scatters ±5 %).
-//!   Without the emitter ±2 px: 16.2 % vs 17.6 % (×1.085 ± 0.002), equal
-//!   time ×1.13.
+//! - Mitsuba must be timed to kernel completion (`dr.sync_thread()`): timing
+//!   `mi.render()` + `dr.eval()` alone times the asynchronous launch and
+//!   reports tens of M paths/s; the 3.4 M paths/s is not
+//!   reproducible with a synchronised timer on this machine.
+//! - ~85 % of the all-pixel MSE is pixel-coverage noise on the emitter's
+//!   edge (identical for both, heavy-tailed: one image's RMSE scatters ±5 %),
+//!   hence the separate light-transport figure (emitter ±2 px excluded).
 //! - camsim's extra per-sample noise is its Russian roulette (from the 2nd
 //!   bounce, survival = max-band throughput, as pbrt-v4), not NEE/MIS: with
 //!   Mitsuba's policy (from depth 5, survival min(max β, 0.95)) camsim's
