@@ -20,22 +20,26 @@
 //! # Findings (measured 2026-11-23, 550 nm, object at 1000 m)
 //! Zemax on-axis: RMS width 0.656 µm, FWHM 0.58 µm (0.39 µm from its LSF
 //! column; the cusp is under-resolved at 0.1 µm, so FWHM is reported, not
-//! tested), MTF50 ≈ 345 cy/mm.
+//! tested), MTF50 347 cy/mm (table; 342.5 through our operator).
 //!
 //! | film mm  | what                    | RMS µm | FWHM µm | MTF 50/100/200        | MTF50 | ESF RMSE |
 //! |----------|-------------------------|--------|---------|-----------------------|-------|----------|
-//! | 0.465136 | paper (fig. 5 "infinity") | 1.199 | 1.62   | 0.930 / 0.735 / 0.137 | 142   | 0.125    |
-//! | 0.4806   | RTF sharpest (min RMS)  | 0.210  | 0.33    | 0.998 / 0.992 / 0.966 | 902   | 0.059    |
-//! | 0.4880   | RTF best match to Zemax | 0.566  | 0.54    | 0.984 / 0.939 / 0.777 | 334   | 0.0055   |
-//! | Zemax    |                         | 0.656  | 0.58    | 0.979 / 0.924 / 0.761 | 345   | —        |
+//! | 0.465136 | paper (fig. 5 "infinity") | 1.198 | 1.62  | 0.930 / 0.736 / 0.139 | 142   | 0.125    |
+//! | 0.4809   | RTF sharpest (min RMS)  | 0.209  | 0.31    | 0.998 / 0.992 / 0.967 | 897   | 0.059    |
+//! | 0.4881   | RTF best match to Zemax | 0.567  | 0.58    | 0.984 / 0.939 / 0.776 | 332   | 0.0057   |
+//! | Zemax    |                         | 0.656  | 0.58    | 0.979 / 0.924 / 0.761 | 347   | —        |
 //!
-//! - The RTF is sharpest at film distance 0.4805–0.4810 mm (RMS-width
-//!   minimum; `camsim lens info` finds 0.48060 by the spread of output
+//! (MTF50 in cy/mm; ESF RMSE between peak-1 curves on Zemax's grid. Printed
+//! again by `cargo test --release --test optics_p4a_zemax -- --nocapture`.)
+//!
+//! - The RTF is sharpest at film distance 0.4809 mm (RMS-width minimum,
+//!   golden section; a 0.5 µm scan puts it at 0.4805–0.4810; `camsim lens info` finds 0.48060 by the spread of output
 //!   directions). There its geometric LSF is ~3× narrower than Zemax's
-//!   (RMS 0.21 vs 0.66 µm, MTF50 ~900 vs ~345 cy/mm).
-//! - Zemax's curve is reproduced almost exactly (ESF RMSE 0.0055, peak-
-//!   normalised LSF RMSE 0.034, MTF within 0.016, MTF50 −3 %) by the RTF
-//!   defocused ~7.5 µm *behind* its best focus (film 0.488 mm). On the other
+//!   (RMS 0.21 vs 0.66 µm, MTF50 ~900 vs ~345 cy/mm). Tangential and
+//!   sagittal are the same on axis (Zemax's table; our edge is along y).
+//! - Zemax's curve is reproduced almost exactly (ESF RMSE 0.0057, peak-
+//!   normalised LSF RMSE 0.038, MTF within 0.015, MTF50 −4 %) by the RTF
+//!   defocused ~7.2 µm *behind* its best focus (film 0.4881 mm). On the other
 //!   side of focus (0.473 mm, RMS 0.60 µm) the shape does not match (ESF
 //!   RMSE 0.046). We cannot tell from the files whether Zemax's image plane
 //!   sits there or whether the difference is Zemax's polychromatic blur
@@ -44,14 +48,19 @@
 //!   working f-number of 3.46 in `lens info`, while the set-up file quotes
 //!   an effective F/1.83 from Zemax: aberration and defocus blur both grow
 //!   with the aperture, so a half-size pupil alone would make the RTF far
-//!   sharper than Zemax at best focus.
-//! - The paper's 0.465136 mm is 15.5 µm in front of the RTF's infinity focus
-//!   (beam vergence −0.82 1/m): blur-circle diameter 15.5 µm / 3.46 ≈ 4.5 µm,
-//!   RMS width 1.2 µm, 1.8× Zemax's; MTF50 142 cy/mm, 0.41× Zemax's.
+//!   sharper than Zemax at best focus. (Diagnostic only, not in the repo:
+//!   doubling the file's ellipse radii gives working F/1.78 but a
+//!   non-monotone ESF near focus — the polynomials are then used outside
+//!   the cone they were fitted on — so the files alone do not settle it.)
+//! - The paper's 0.465136 mm is 15.7 µm of film travel in front of the
+//!   RTF's sharpest focus (15.5 µm from `lens info`'s 0.48060; beam vergence
+//!   −0.82 1/m): blur-circle diameter ≈ 15.7 µm / 3.46 ≈ 4.5 µm, RMS width
+//!   1.2 µm, 1.8× Zemax's; MTF50 142 cy/mm, 0.41× Zemax's.
 //! - Fig. 7's film distances do not focus this RTF at fig. 7's object
-//!   distances (objects 0.5 / 0.3 m from the front vertex, window ±10 µm):
+//!   distances (on axis; objects 0.5 / 0.3 m from the front vertex; window
+//!   ±10 µm):
 //!   0.5 m at 0.49234 mm → RMS 1.95 µm, MTF50 89 cy/mm (the RTF is sharpest
-//!   there at ≈ 0.520 mm: RMS 0.22 µm, MTF50 ~870); 0.3 m at 0.57624 mm →
+//!   there at ≈ 0.520 mm in a 5 µm scan: RMS 0.22 µm, MTF50 ~870); 0.3 m at 0.57624 mm →
 //!   RMS 2.18 µm, MTF50 82 cy/mm (sharpest ≈ 0.545 mm: RMS 0.22 µm). So the
 //!   "in focus" edges of fig. 7 rendered with the paper's film distances are
 //!   defocused by ≈ −28 µm and +31 µm of film travel and cannot be expected
@@ -366,19 +375,19 @@ fn optics_p4a_rtf_lsf_mtf_vs_zemax() {
         (d_match - d_best) * 1e3
     );
 
-    // Sharpest focus: measured 0.4805–0.4810 vs 0.48060 by direction spread.
+    // Sharpest focus: measured 0.48088 vs 0.48060 by direction spread.
     assert!(
         (d_best - d_inf).abs() < 1.5e-3,
         "sharpest {d_best} vs infinity focus {d_inf}"
     );
-    // The paper's film distance is defocused: measured 15.5 µm in front.
+    // The paper's film distance is defocused: measured 15.7 µm in front.
     let defocus_um = (d_best - 0.465136) * 1e3;
     assert!(
         (12.0..19.0).contains(&defocus_um),
         "paper defocus {defocus_um} µm"
     );
     // At best focus the 550 nm RTF is ~3× sharper than Zemax: RMS 0.210 vs
-    // 0.656 µm (ratio 0.32), MTF50 ~900 vs 345 cy/mm.
+    // 0.656 µm (ratio 0.32), MTF50 897 vs 347 cy/mm.
     assert!(
         best.rms_um < 0.45 * zemax.rms_um,
         "best-focus RMS {} vs Zemax {}",
@@ -386,8 +395,8 @@ fn optics_p4a_rtf_lsf_mtf_vs_zemax() {
         zemax.rms_um
     );
     assert!(best.mtf50 > 2.0 * t50, "best-focus MTF50 {}", best.mtf50);
-    // Zemax is reproduced 7.5 µm behind best focus: ESF RMSE 0.0055, LSF
-    // RMSE 0.034, RMS width −14 %, MTF within 0.016, MTF50 −3 %.
+    // Zemax is reproduced 7.2 µm behind best focus: ESF RMSE 0.0057, LSF
+    // RMSE 0.038, RMS width −14 %, MTF within 0.015, MTF50 −4.4 %.
     let behind_um = (d_match - d_best) * 1e3;
     assert!(
         (5.0..10.0).contains(&behind_um),
