@@ -67,6 +67,8 @@
 //!   to show the absolute LSF widths of the paper or of Zemax; with the
 //!   RTF's own focus they are ~3× sharper than Zemax's geometric LSF.
 
+mod common;
+
 use camsim::optics::analysis::{self, LensCamera};
 use std::path::Path;
 
@@ -75,28 +77,16 @@ const WAVELENGTH_NM: f64 = 550.0;
 
 /// Zemax on-axis LSF table: (position_um, lsf_x, erf_x).
 fn zemax_lsf() -> Vec<(f64, f64, f64)> {
-    std::fs::read_to_string("lenses/zemax-reference/zemax_p4a_geometric_lsf_onaxis.csv")
-        .unwrap()
-        .lines()
-        .filter(|l| !l.starts_with('#') && !l.starts_with('p'))
-        .map(|l| {
-            let v: Vec<f64> = l.split(',').map(|x| x.trim().parse().unwrap()).collect();
-            (v[0], v[1], v[2])
-        })
+    common::numeric_rows("lenses/zemax-reference/zemax_p4a_geometric_lsf_onaxis.csv")
+        .into_iter()
+        .map(|v| (v[0], v[1], v[2]))
         .collect()
 }
 
 /// Zemax on-axis MTF: (freq_cy_per_mm, tangential, sagittal).
 fn zemax_mtf_on_axis() -> Vec<(f64, f64, f64)> {
-    std::fs::read_to_string("lenses/zemax-reference/zemax_p4a_geometric_mtf.csv")
-        .unwrap()
-        .lines()
-        .filter(|l| !l.starts_with('#') && !l.starts_with('f'))
-        .map(|l| {
-            l.split(',')
-                .map(|x| x.trim().parse().unwrap())
-                .collect::<Vec<f64>>()
-        })
+    common::numeric_rows("lenses/zemax-reference/zemax_p4a_geometric_mtf.csv")
+        .into_iter()
         .filter(|v| v[0] == 0.0)
         .map(|v| (v[1], v[2], v[3]))
         .collect()

@@ -1,6 +1,8 @@
 //! RTF camera: the paper's Pixel 4a RTF against the Zemax relative
 //! illumination (acceptance), pass/no-pass edge cases, file errors.
 
+mod common;
+
 use camsim::optics::Camera;
 use camsim::optics::rtf::{Rtf, RtfCamera};
 use glam::{DVec2, DVec3};
@@ -9,14 +11,9 @@ use std::path::Path;
 const P4A: &str = "lenses/rtf/pixel4a-rearcamera-ellipse-raytransfer.json";
 
 fn zemax_p4a() -> Vec<(f64, f64)> {
-    std::fs::read_to_string("lenses/zemax-reference/zemax_p4a_relative_illumination.csv")
-        .unwrap()
-        .lines()
-        .filter(|l| !l.starts_with('#') && !l.starts_with('y'))
-        .map(|l| {
-            let v: Vec<f64> = l.split(',').map(|x| x.trim().parse().unwrap()).collect();
-            (v[0], v[1])
-        })
+    common::numeric_rows("lenses/zemax-reference/zemax_p4a_relative_illumination.csv")
+        .into_iter()
+        .map(|v| (v[0], v[1]))
         .collect()
 }
 

@@ -29,6 +29,8 @@
 //! (RI) and 40×40 (ESF) midpoint grids over the pupil sample square; their
 //! error (< 0.3 % of a value) is well inside the tolerances.
 
+mod common;
+
 use camsim::optics::Camera;
 use camsim::optics::analysis::{edge_spread, film_residuals, relative_illumination};
 use camsim::optics::fit::{
@@ -51,27 +53,18 @@ struct Case {
 }
 
 fn read_pairs(path: &str) -> Vec<(f64, f64)> {
-    std::fs::read_to_string(path)
-        .unwrap()
-        .lines()
-        .filter(|l| !l.trim().is_empty() && !l.starts_with('#'))
-        .map(|l| {
-            let v: Vec<f64> = l.split(',').map(|x| x.trim().parse().unwrap()).collect();
-            (v[0], v[1])
-        })
+    common::numeric_rows(path)
+        .into_iter()
+        .map(|v| (v[0], v[1]))
         .collect()
 }
 
 /// Zemax ESF (x edge) of condition 0: (position µm, esf).
 fn read_esf(path: &str) -> Vec<(f64, f64)> {
-    std::fs::read_to_string(path)
-        .unwrap()
-        .lines()
-        .filter(|l| !l.starts_with('#') && !l.starts_with("condition"))
-        .filter_map(|l| {
-            let v: Vec<f64> = l.split(',').map(|x| x.trim().parse().unwrap()).collect();
-            (v[0] == 0.0).then_some((v[1], v[3]))
-        })
+    common::numeric_rows(path)
+        .into_iter()
+        .filter(|v| v[0] == 0.0)
+        .map(|v| (v[1], v[3]))
         .collect()
 }
 
