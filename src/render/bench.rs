@@ -49,7 +49,7 @@
 //!
 //! ## Measured (`bench/mitsuba_compare.sh`, 2 threads)
 //! Current figures (idle machine, 4 seeds, 32 spp) are in `render/mod.rs`:
-//! camsim 1.31× Mitsuba's paths/s; equal-time RMSE 0.84 (all pixels) and
+//! camsim 1.35× Mitsuba's paths/s; equal-time RMSE 0.84 (all pixels) and
 //! 0.944 (light transport). Method notes from the first runs (load ≈ 6–7):
 //! - Converged images agree: camsim 512 spp vs Mitsuba 1024 spp, mean Y
 //!   ratio 0.9999; 16×16-pixel block means differ by 0.47 % RMS (max 1.6 %),

@@ -32,19 +32,20 @@
 //! - Performance (`bench/mitsuba_compare.sh`: Mitsuba `cornell_box()`, 256²,
 //!   max_depth 7 = max_bounces 6, 2 threads, CIE Y against one converged
 //!   Mitsuba reference, box filter, 4 seeds; 2026-11-23, idle 2-core machine):
-//!   camsim (31 bands, 4-wide BVH, stratified film positions) 1.213 M paths/s
-//!   wall, 0.617 M per CPU-s; Mitsuba 3.9.1 `llvm_ad_spectral` (4 wavelengths,
-//!   default independent sampler) 0.929 M paths/s, 0.466 M per CPU-s → ratio
-//!   1.31 (wall) / 1.32 (CPU). Equal-time relative RMSE camsim/Mitsuba: all
-//!   pixels 0.842 ± 0.046 (0.817 at equal CPU time); light transport only
-//!   (emitter edge ±2 px excluded) 0.944 ± 0.002 (0.941 at equal CPU time).
+//!   camsim (31 bands, 4-wide BVH, stratified film positions) 1.250 M paths/s
+//!   wall, 0.636 M per CPU-s; Mitsuba 3.9.1 `llvm_ad_spectral` (4 wavelengths,
+//!   default independent sampler) 0.928 M paths/s, 0.466 M per CPU-s → ratio
+//!   1.35 (wall) / 1.37 (CPU). Equal-time relative RMSE camsim/Mitsuba: all
+//!   pixels 0.844 ± 0.047 (0.804 at equal CPU time); light transport only
+//!   (emitter edge ±2 px excluded) 0.944 ± 0.003 (0.926 at equal CPU time).
 //!   Converged images agree (mean Y ratio 0.9998, 16×16 blocks 0.46 % RMS).
-//!   Session 3 cut the instructions per path by 12 % (callgrind, same images
-//!   bit for bit): precomputed triangle normals, BVH4 traversal that goes
-//!   straight into the nearest child, a box test without per-ray indexing,
-//!   band vectors padded to a multiple of 8, a vectorised roulette maximum and
-//!   per-pixel standard error (before: 1.048 M paths/s, 1.14×; light
-//!   transport 1.014).
+//!   Session 3 cut the instructions per path by 13 % (callgrind; the first
+//!   six changes leave the images bit for bit unchanged): precomputed triangle
+//!   normals, BVH4 traversal that goes straight into the nearest child, a box
+//!   test without per-ray indexing, band vectors padded to a multiple of 8, a
+//!   vectorised roulette maximum, band-vectorised per-pixel standard error, and
+//!   a series sin/cos in the concentric disk map (before: 1.048 M paths/s,
+//!   1.14×; light transport 1.014).
 //!   Mitsuba's LLVM `render()` returns before its kernels run (17 ms for a
 //!   12 s render): timing it without synchronising gave the 3–9 M paths/s
 //!   quoted earlier — an artefact. camsim's Russian roulette (from the 2nd
