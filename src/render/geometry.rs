@@ -322,9 +322,7 @@ impl Shape {
     pub fn surface(&self, o: Vec3, d: Vec3, h: &PrimHit) -> (Vec3, Vec3, Vec3) {
         match *self {
             Shape::Triangle { p } => {
-                let [b0, b1, b2] = h.b;
-                let pt = p[0] * b0 + p[1] * b1 + p[2] * b2;
-                let err = ((p[0] * b0).abs() + (p[1] * b1).abs() + (p[2] * b2).abs()) * gamma(7);
+                let (pt, err) = triangle_point(&p, h.b, HIT_POINT_GAMMA);
                 let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
                 (pt, err, n)
             }
@@ -349,6 +347,19 @@ impl Shape {
             }
         }
     }
+}
+
+/// γ order of a hit point's error bound (barycentric interpolation of the
+/// vertices after the watertight test, pbrt-v4).
+pub const HIT_POINT_GAMMA: i32 = 7;
+
+/// The point at barycentrics `b` on triangle `p` and its rounding-error bound
+/// Σ|pᵢ·bᵢ|·γ(`n`) (pbrt-v4: n = 7 for a ray hit, 6 for a sampled point).
+#[inline(always)]
+pub fn triangle_point(p: &[Vec3; 3], b: [f32; 3], n: i32) -> (Vec3, Vec3) {
+    let pt = p[0] * b[0] + p[1] * b[1] + p[2] * b[2];
+    let err = ((p[0] * b[0]).abs() + (p[1] * b[1]).abs() + (p[2] * b[2]).abs()) * gamma(n);
+    (pt, err)
 }
 
 /// Next representable f32 towards +inf / −inf.

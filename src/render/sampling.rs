@@ -147,8 +147,8 @@ pub fn uniform_triangle(u: f32, v: f32) -> (f32, f32, f32) {
     (b0, b1, (1.0 - b0 - b1).max(0.0))
 }
 
-/// Sample an index from a cumulative table (last entry = 1); returns index and the
-/// remapped uniform.
+/// Sample an index from a cumulative table (last entry = 1): the first entry
+/// above `u`.
 pub fn sample_cdf(cdf: &[f32], u: f32) -> usize {
     // The first entry above u; a linear scan for the few lights of most
     // scenes (the same index as the binary search, without its mispredicts).

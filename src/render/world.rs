@@ -6,7 +6,7 @@
 //! instance is treated as a prototype only and is not rendered by itself.
 
 use super::bsdf::Bsdf;
-use super::geometry::{Accel, BvhKind, PrimHit, Shape, gamma};
+use super::geometry::{Accel, BvhKind, HIT_POINT_GAMMA, PrimHit, Shape, triangle_point};
 use super::sampling::{Frame, sample_cdf, uniform_sphere, uniform_triangle};
 use crate::scene::{Emission, Light, Material, Scene};
 use crate::spectrum::{Spectrum, WavelengthGrid};
@@ -471,9 +471,7 @@ impl World {
     pub fn surface(&self, prim: u32, o: Vec3, d: Vec3, h: &PrimHit) -> (Vec3, Vec3, Vec3) {
         match self.accel.shapes[prim as usize] {
             Shape::Triangle { p } => {
-                let [b0, b1, b2] = h.b;
-                let pt = p[0] * b0 + p[1] * b1 + p[2] * b2;
-                let err = ((p[0] * b0).abs() + (p[1] * b1).abs() + (p[2] * b2).abs()) * gamma(7);
+                let (pt, err) = triangle_point(&p, h.b, HIT_POINT_GAMMA);
                 (pt, err, self.tri_ng[prim as usize])
             }
             ref s => s.surface(o, d, h),
@@ -503,9 +501,7 @@ impl World {
                 let (pl, err, nl) = match *shape {
                     super::geometry::Shape::Triangle { p: v } => {
                         let (b0, b1, b2) = uniform_triangle(u1, u2);
-                        let pt = v[0] * b0 + v[1] * b1 + v[2] * b2;
-                        let err = ((v[0] * b0).abs() + (v[1] * b1).abs() + (v[2] * b2).abs())
-                            * super::geometry::gamma(6);
+                        let (pt, err) = triangle_point(&v, [b0, b1, b2], 6);
                         (pt, err, self.tri_ng[*prim as usize])
                     }
                     super::geometry::Shape::Sphere { center, radius } => {
