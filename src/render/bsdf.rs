@@ -120,7 +120,8 @@ pub fn fresnel_conductor(cos_i: f32, eta: f32, k: f32) -> f32 {
     (0.5 * (rp + rs)) as f32
 }
 
-fn mean(v: &[f32]) -> f32 {
+/// Mean of a band vector (0 when empty); also the light powers in `world.rs`.
+pub(super) fn mean(v: &[f32]) -> f32 {
     if v.is_empty() {
         0.0
     } else {

@@ -5,7 +5,7 @@
 //! Instances are flattened into world-space triangles. A mesh referenced by any
 //! instance is treated as a prototype only and is not rendered by itself.
 
-use super::bsdf::Bsdf;
+use super::bsdf::{Bsdf, mean};
 use super::geometry::{Accel, BvhKind, HIT_POINT_GAMMA, PrimHit, Shape, triangle_point};
 use super::sampling::{Frame, sample_cdf, uniform_sphere, uniform_triangle};
 use crate::scene::{Emission, Light, Material, Scene};
@@ -108,10 +108,6 @@ fn resample(s: &Spectrum, grid: &WavelengthGrid, what: &str) -> Result<Vec<f32>>
         )));
     }
     Ok(v.into_iter().map(|x| x as f32).collect())
-}
-
-fn mean(v: &[f32]) -> f32 {
-    v.iter().sum::<f32>() / v.len().max(1) as f32
 }
 
 fn finite3(v: DVec3) -> bool {
