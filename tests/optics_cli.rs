@@ -144,3 +144,55 @@ fn optics_cli_lens_info_focus_of_film_distance() {
     }
     assert!(info(Some("0.465136"))[7] < -0.5);
 }
+
+/// The fit's sampling flags: bad values are one-line errors naming the flag
+/// and leave no RTF file; `--axis-weight` and `--sampling input-plane` reach
+/// the fit (each changes the written polynomials).
+#[test]
+fn optics_cli_fit_rtf_sampling_flags() {
+    let dir = tempfile::tempdir().unwrap();
+    let lens = "lenses/prescriptions/tessar-zemax.json";
+    let fit = |name: &str, extra: &[&str]| {
+        let p = dir.path().join(name);
+        let mut args = vec![
+            "lens",
+            "fit-rtf",
+            lens,
+            "--degree",
+            "3",
+            "--out",
+            p.to_str().unwrap(),
+        ];
+        args.extend(extra);
+        let (ok, _, err) = camsim(&args);
+        (ok, err, p)
+    };
+    for (extra, expect) in [
+        (&["--axis-weight", "0"][..], "axis weight"),
+        (&["--axis-weight", "NaN"][..], "axis weight"),
+        (
+            &["--focus-distances-f", "inf,abc"][..],
+            "--focus-distances-f",
+        ),
+        (&["--focus-distances-f", "0.5"][..], "focal length"),
+        (&["--sampling", "grid"][..], "--sampling"),
+    ] {
+        let (ok, err, p) = fit("bad.json", extra);
+        assert!(!ok, "{extra:?} accepted");
+        assert!(err.contains(expect), "{extra:?}: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(!p.exists(), "{extra:?} wrote {}", p.display());
+    }
+    let read = |p: &std::path::Path| std::fs::read_to_string(p).unwrap();
+    let (ok, err, base) = fit("base.json", &[]);
+    assert!(ok, "{err}");
+    for (name, extra) in [
+        ("axis.json", &["--axis-weight", "64"][..]),
+        ("plane.json", &["--sampling", "input-plane"][..]),
+        ("inf.json", &["--focus-distances-f", "inf"][..]),
+    ] {
+        let (ok, err, p) = fit(name, extra);
+        assert!(ok, "{extra:?}: {err}");
+        assert_ne!(read(&p), read(&base), "{extra:?} did not change the fit");
+    }
+}
