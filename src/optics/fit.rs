@@ -36,6 +36,7 @@
 //!   1.1/1.1/1.3 %, degree 7 1.5/1.8/2.8 → 0.7/1.4/2.1 %; film residual RMS
 //!   at infinity focus (dominated by the 42° strongly vignetted rim)
 //!   226/250/135/69/47 → 206/310/196/102/62 µm.
+//!
 //! The input-plane data sample the on-axis image only at the r = 0 input
 //! point and the next radius (1.8 / 3.75 mm away), while the rays of one
 //! film point 10 mm behind the input plane (the 1–1.3 m focus of the ESF)
