@@ -676,16 +676,12 @@ struct BlackBox<'a> {
 impl BlackBox<'_> {
     /// Trace a ray from input point (0, r) (rotated frame) towards the
     /// pass-plane point (px, py). Returns input (r, dx, dy) and outputs.
-    fn trace(&self, r: f64, px: f64, py: f64) -> Option<([f64; 3], [f64; 5])> {
+    fn trace(&self, r: f64, px: f64, py: f64) -> Option<Sample> {
         let o = DVec3::new(0.0, r, self.z_in);
-        let d = (DVec3::new(px, py, self.z_in + self.pass_distance) - o).normalize();
-        let (p, dir) = self.lens.trace_to_scene(o, d, self.wavelength_nm).ok()?;
-        let t = (self.z_out - p.z) / dir.z;
-        if !(t >= -1e-9) {
-            return None;
-        }
-        let q = p + dir * t;
-        Some(([r, d.x, d.y], [q.x, q.y, dir.x, dir.y, dir.z]))
+        self.trace_dir(
+            r,
+            (DVec3::new(px, py, self.z_in + self.pass_distance) - o).normalize(),
+        )
     }
     /// Trace from input point (0, r) along unit direction `d` (rotated frame).
     fn trace_dir(&self, r: f64, d: DVec3) -> Option<Sample> {
@@ -698,8 +694,8 @@ impl BlackBox<'_> {
         let q = p + dir * t;
         Some(([r, d.x, d.y], [q.x, q.y, dir.x, dir.y, dir.z]))
     }
-    /// The rays an RTF camera (`cam`, its film `film_mm` behind the rear
-    /// vertex) traces from film point (0, r_f): an n × n grid over its
+    /// The rays the RTF camera `cam` (its film plane, its pass regions)
+    /// traces from film point (0, r_f): an n × n grid over its
     /// pupil sampling box on the pass plane, each ray put in the fit's frame
     /// (input point rotated onto +y) and traced; rays crossing the input
     /// plane beyond `r_max` or blocked by the lens are left out.
