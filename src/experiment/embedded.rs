@@ -22,6 +22,7 @@ pub const EXPERIMENTS: &[(&str, &str)] = &[
     embed!("cornell-box.kdl"),
     embed!("e2e-quick.kdl"),
     embed!("fig07-lsf-mtf.kdl"),
+    embed!("rtf-vs-prescription.kdl"),
     embed!("smoke.kdl"),
 ];
 

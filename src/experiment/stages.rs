@@ -12,6 +12,7 @@ use crate::measure::plane::Plane;
 use crate::measure::sfr::{SfrChannel, SfrOptions};
 use crate::optical_image::{OpticalImage, Rect};
 use crate::optics::Camera;
+use crate::params::Value;
 use crate::render::RenderSettings;
 use crate::scene::{
     CameraModel, CameraPose, CameraSpec, FilmSpec, Material, Scene, look_at_to_world, targets,
@@ -317,9 +318,48 @@ pub fn build_camera(spec: &ResolvedExperiment, scene: &Scene) -> Result<Box<dyn 
         let fd_mm = p.f64("film-distance-mm").map_err(Error::invalid)?;
         let focus_m = p.f64("focus-distance-m").map_err(Error::invalid)?;
         if let Some(f) = &l.file {
-            if let Some(u) = p.unknown(&["film-distance-mm", "focus-distance-m"]).first() {
+            const KEYS: [&str; 4] = [
+                "film-distance-mm",
+                "focus-distance-m",
+                "rtf-degree",
+                "rtf-axis-weight",
+            ];
+            if let Some(u) = p.unknown(&KEYS).first() {
                 return Err(Error::invalid(format!(
-                    "lens '{}': unknown property '{u}'; a lens file takes film-distance-mm or focus-distance-m",
+                    "lens '{}': unknown property '{u}'; a lens file takes {}",
+                    f.written,
+                    KEYS.join(", ")
+                )));
+            }
+            // rtf-degree=N renders the prescription through an RTF of degree
+            // N fitted to it; "none" (the default) traces the file as it is,
+            // so a sweep can compare both.
+            let degree = match p.get("rtf-degree") {
+                None => None,
+                Some(Value::String(s)) if s == "none" => None,
+                Some(Value::Number(d)) if d.fract() == 0.0 && (1.0..=16.0).contains(d) => {
+                    Some(*d as usize)
+                }
+                Some(v) => {
+                    return Err(Error::invalid(format!(
+                        "lens '{}': rtf-degree = {v}; expected a whole number 1…16 or \"none\"",
+                        f.written
+                    )));
+                }
+            };
+            let axis_weight = p.f64("rtf-axis-weight").map_err(Error::invalid)?;
+            if let Some(d) = degree {
+                return crate::optics::analysis::fitted_rtf_camera(
+                    &f.path,
+                    fd_mm.map(|d| d * 1e-3),
+                    focus_m,
+                    d,
+                    axis_weight.unwrap_or(1.0),
+                );
+            }
+            if axis_weight.is_some() {
+                return Err(Error::invalid(format!(
+                    "lens '{}': rtf-axis-weight needs rtf-degree",
                     f.written
                 )));
             }

@@ -182,6 +182,51 @@ pub fn load_lens_camera(
     })
 }
 
+/// A lens prescription rendered through an RTF fitted to it on the fly
+/// (KDL `lens "file" rtf-degree=N`): the film distance is the
+/// prescription's (given, or solved for `focus_distance_m` at 550 nm, or
+/// infinity focus), so the RTF and the prescription it stands for are
+/// focused alike. Fitted at 550 nm, or at 400–700 nm every 50 nm when the
+/// prescription is dispersive (the RTF camera takes the nearest fitted
+/// wavelength); other fit settings are `FitOptions::default()` with
+/// `axis_weight`.
+pub fn fitted_rtf_camera(
+    path: &Path,
+    film_distance_m: Option<f64>,
+    focus_distance_m: Option<f64>,
+    degree: usize,
+    axis_weight: f64,
+) -> Result<Box<dyn Camera>> {
+    let LensFile::Prescription(p) = load_lens(path)? else {
+        return Err(Error::Invalid(format!(
+            "{}: rtf-degree needs a lens prescription to fit, and this file is an RTF",
+            path.display()
+        )));
+    };
+    let LensCamera::Prescription(pc) = lens_camera(
+        LensFile::Prescription(p.clone()),
+        film_distance_m.map(|d| d * 1e3),
+        focus_distance_m,
+        DEFAULT_WAVELENGTH_NM,
+    )?
+    else {
+        unreachable!("a prescription gives a prescription camera")
+    };
+    let waves: Vec<f64> = if p.is_dispersive() {
+        (0..=6).map(|k| 400.0 + 50.0 * k as f64).collect()
+    } else {
+        vec![DEFAULT_WAVELENGTH_NM]
+    };
+    let opts = crate::optics::fit::FitOptions {
+        degree,
+        axis_weight,
+        ..Default::default()
+    };
+    let (rtf, _) = crate::optics::fit::fit_rtf(&p, &waves, &opts)
+        .map_err(|e| Error::Invalid(format!("{}: fitting the RTF: {e}", path.display())))?;
+    Ok(Box::new(RtfCamera::new(rtf, pc.film_distance_mm)?))
+}
+
 /// Film distance at which an RTF images infinity: rays from the on-axis film
 /// point leave parallel. Found by minimising the spread of output directions
 /// (golden-section search over the film distance).
