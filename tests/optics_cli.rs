@@ -92,6 +92,16 @@ fn optics_cli_fit_rtf_round_trip() {
     );
     assert_eq!(h[5], "condition_number");
     assert_eq!(r.len(), 5, "outx outy outdx outdy outdz");
+    // The validation summary on stderr: RI within 0.01 of the prescription
+    // (tests/optics_rtf_fit.rs: 0.004 for this lens at every degree).
+    let ri_err: f64 = err
+        .split("max |error| ")
+        .nth(1)
+        .and_then(|t| t.split_whitespace().next())
+        .and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("no validation summary: {err}"));
+    assert!(ri_err < 0.01, "{err}");
+    assert!(err.contains("geometric ESF RMSE"), "{err}");
     assert!(r.iter().all(|row| row[5].is_finite() && row[6].is_finite()));
     let (ok, out, err) = camsim(&["lens", "info", p]);
     assert!(ok, "{err}");

@@ -221,6 +221,27 @@ pub fn run(c: LensCmd) -> Result<i32> {
             let text = serde_json::to_string_pretty(&rtf.to_json())
                 .map_err(|e| Error::Invalid(e.to_string()))?;
             camsim::diag::write_atomic(&a.out, text.as_bytes())?;
+            // How good the fit is in image terms (stderr; stdout is the CSV).
+            let v = analysis::validate_rtf(&p, &rtf, waves[0])?;
+            let pct = |x: f64| {
+                if x.is_finite() {
+                    format!("{:.2} %", 100.0 * x)
+                } else {
+                    "no light".into()
+                }
+            };
+            eprintln!(
+                "fit-rtf: RTF vs prescription at {} nm: relative illumination max |error| {:.4} \
+                 (0–95 % of the film radius); geometric ESF RMSE, object {:.0} mm away, on axis {}, \
+                 at 25/50/75 % of the film radius {} / {} / {}",
+                v.wavelength_nm,
+                v.ri_max_abs_err,
+                v.object_mm,
+                pct(v.esf_rmse[0]),
+                pct(v.esf_rmse[1]),
+                pct(v.esf_rmse[2]),
+                pct(v.esf_rmse[3])
+            );
             out.push_str("wavelength_nm,output,degree,n_terms,n_samples,condition_number,rms_residual,max_residual\n");
             for r in reports {
                 out.push_str(&format!(

@@ -597,3 +597,72 @@ pub fn film_residuals(
         n_blocked,
     })
 }
+
+/// How closely a fitted RTF reproduces the prescription it was fitted to,
+/// in image terms (`fit-rtf` prints it).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RtfValidation {
+    pub wavelength_nm: f64,
+    /// Largest |RI(RTF) − RI(prescription)| over 0–95 % of the film radius
+    /// that receives light, infinity focus (13 heights).
+    pub ri_max_abs_err: f64,
+    /// Object distance of the ESF checks, from the front vertex (mm).
+    pub object_mm: f64,
+    /// ESF RMSE of RTF vs prescription (normalised by the mean of the 10
+    /// largest prescription values; film at the object's paraxial focus;
+    /// 201 positions over ±1.5 blur half-widths) at 0, 25, 50 and 75 % of
+    /// the film radius. NaN where the RTF sends no light.
+    pub esf_rmse: [f64; 4],
+}
+
+/// Compare `rtf` with `lens` at `wavelength_nm`: relative illumination
+/// (infinity focus) and geometric ESFs of an object 20 focal lengths from
+/// the front vertex. The RTF uses the prescription's film distances.
+pub fn validate_rtf(lens: &Prescription, rtf: &Rtf, wavelength_nm: f64) -> Result<RtfValidation> {
+    let px = lens.paraxial(wavelength_nm)?;
+    let bfd = px.back_focal_distance_mm;
+    let object_mm = 20.0 * px.effective_focal_length_mm.abs();
+    let film = lens.image_distance_mm(object_mm, wavelength_nm)?;
+    let presc_inf = PrescriptionCamera::new(lens.clone(), bfd, wavelength_nm)?;
+    let r_hi = 0.95 * presc_inf.max_film_radius_mm;
+    let heights: Vec<f64> = (0..=12).map(|k| r_hi * k as f64 / 12.0).collect();
+    let ri_p = relative_illumination(&presc_inf, &heights, wavelength_nm, 64)?;
+    let ri_r = relative_illumination(
+        &RtfCamera::new(rtf.clone(), bfd)?,
+        &heights,
+        wavelength_nm,
+        64,
+    )?;
+    let ri_max_abs_err = ri_p
+        .iter()
+        .zip(&ri_r)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    let presc = PrescriptionCamera::new(lens.clone(), film, wavelength_nm)?;
+    let cam = RtfCamera::new(rtf.clone(), film)?;
+    let z_obj = film + lens.total_track_mm() + object_mm;
+    let mut esf_rmse = [f64::NAN; 4];
+    for (k, e) in esf_rmse.iter_mut().enumerate() {
+        let field = r_hi / 0.95 * 0.25 * k as f64;
+        let w = (1.5 * blur_half_width_um(&presc, z_obj, field, wavelength_nm)).max(2.0);
+        let pos: Vec<f64> = (0..=200).map(|i| -w + 2.0 * w * i as f64 / 200.0).collect();
+        let esf = |c: &dyn Camera| -> Option<Vec<f64>> {
+            edge_spread(c, z_obj, field, &pos, wavelength_nm, 40)
+                .ok()
+                .map(|v| v.into_iter().map(|x| x.0).collect())
+        };
+        if let (Some(a), Some(b)) = (esf(&presc), esf(&cam)) {
+            let mut top = a.clone();
+            top.sort_by(|x, y| y.total_cmp(x));
+            let norm = top.iter().take(10).sum::<f64>() / 10.0;
+            let ss = a.iter().zip(&b).map(|(x, y)| (x - y).powi(2)).sum::<f64>();
+            *e = (ss / a.len() as f64).sqrt() / norm;
+        }
+    }
+    Ok(RtfValidation {
+        wavelength_nm,
+        ri_max_abs_err,
+        object_mm,
+        esf_rmse,
+    })
+}
