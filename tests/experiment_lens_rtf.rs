@@ -1,7 +1,7 @@
 //! `lens "PRESCRIPTION" rtf-degree=N` in an experiment: the prescription is
 //! rendered through an RTF fitted to it on the fly, focused like the
-//! prescription, so a sweep compares both in images. Bad values fail the
-//! variant with a message naming the property.
+//! prescription, so a sweep compares both in images. Bad values are errors
+//! at the property's file:line:col before anything runs.
 
 use std::path::Path;
 use std::process::Command;
@@ -79,7 +79,7 @@ fn fitted_rtf_renders_like_its_prescription() {
     assert!(p > 0.0 && (r / p - 1.0).abs() < 0.05, "{m:?}");
 }
 
-/// Bad rtf-degree / rtf-axis-weight values fail the variant and say why.
+/// Bad rtf-degree / rtf-axis-weight values are located errors; nothing runs.
 #[test]
 fn bad_rtf_degree_values_are_reported() {
     let dir = tempfile::tempdir().unwrap();
@@ -109,16 +109,21 @@ fn bad_rtf_degree_values_are_reported() {
         ),
         (
             format!(r#"lens "{dgauss}" rtf-degree=5 rtf-axis-weight=-1"#),
-            "axis weight",
+            "'rtf-axis-weight' must be a positive number",
+        ),
+        (
+            format!(r#"lens "{dgauss}" rtf-degre="none""#),
+            "did you mean 'rtf-degree'?",
         ),
     ] {
         let exp = experiment(dir.path(), &lens, "render.seed 1");
         let out = dir.path().join("bad");
         let log = run(&exp, &out);
+        // Reported before anything runs, at the property (line 4 holds the lens).
         assert!(
-            log.contains("FAILED") && log.contains(expect),
+            log.contains("lens-rtf.kdl:4:") && log.contains(expect),
             "{lens}: {log}"
         );
-        assert!(!log.contains("panicked"), "{log}");
+        assert!(!log.contains("panicked") && !out.exists(), "{log}");
     }
 }

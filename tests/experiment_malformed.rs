@@ -101,6 +101,16 @@ const CASES: &[(&str, &str, &str)] = &[
         "expected a unit suffix, e.g. film-distance-mm",
     ),
     (
+        "lens-model-unknown-property.kdl",
+        "lens-model-unknown-property.kdl:2:37",
+        "unknown property 'film-distance-mm'; expected one of: model, fov-deg",
+    ),
+    (
+        "lens-rtf-degree-fraction.kdl",
+        "lens-rtf-degree-fraction.kdl:2:68",
+        "rtf-degree = 2.5; expected a whole number 1…16",
+    ),
+    (
         "measures-nothing.kdl",
         "measures-nothing.kdl:1:1",
         "measures nothing",
@@ -164,6 +174,11 @@ const CASES: &[(&str, &str, &str)] = &[
         "scene-wrong-extension.kdl",
         "scene-wrong-extension.kdl:2:11",
         "expected a .pbrt or .kdl scene file",
+    ),
+    (
+        "sensor-unknown-property.kdl",
+        "sensor-unknown-property.kdl:2:33",
+        "unknown sensor property 'exposur-s' (did you mean 'exposure-s'?)",
     ),
     (
         "sensor-number-without-unit.kdl",

@@ -1,9 +1,11 @@
 //! Validator hooks: the sensor, lens and measurement modules own the names of
 //! their parameters; the experiment language only enforces the unit rule and
-//! the value types. Each module registers a [`SectionValidator`] here (the lead
-//! wires them in [`install_defaults`]), and `camsim check` / `plan` call it on
-//! the resolved section of every variant, so a misspelt sensor property is an
-//! error with `file:line:col` before anything runs.
+//! the value types. Each module provides a [`SectionValidator`] (built in:
+//! colorimetry, `sensor` → `sensor::config::validate_overrides`, `lens` →
+//! `stages::validate_lens`; others through [`register`]), and `camsim check` /
+//! `plan` / `run` call it on the resolved section of every variant, so a
+//! misspelt sensor property is an error with `file:line:col` before anything
+//! runs.
 //!
 //! Section keys: `"sensor"`, `"lens"`, `"measure:<kind>"` (e.g. `"measure:sfr"`),
 //! `"add:<target>"` (e.g. `"add:slanted-edge"`), `"override"`.
@@ -83,17 +85,17 @@ pub fn validator(section: &str) -> Option<SectionValidator> {
 fn builtin(section: &str) -> Option<SectionValidator> {
     match section {
         "measure:colorimetry" => Some(validate_colorimetry),
+        "sensor" => Some(crate::sensor::config::validate_overrides),
+        "lens" => Some(super::stages::validate_lens),
         _ => None,
     }
 }
 
-/// Validators camsim ships. Called by the CLI before parsing. The lead adds the
-/// sensor/lens/measurement validators here as those modules land, e.g.
-/// `register("sensor", crate::sensor::validate_overrides)`.
-pub fn install_defaults() {
-    // register("sensor", crate::sensor::validate_overrides);
-    // register("lens", crate::optics::validate_overrides);
-}
+/// Validators camsim installs beyond the built-in ones (colorimetry, the
+/// sensor section: `sensor::config::validate_overrides`, the lens section:
+/// `stages::validate_lens`). Called by the CLI before parsing; a place for
+/// validators of future modules.
+pub fn install_defaults() {}
 
 /// `measure "colorimetry" spectrum="cie-d65" [wavelength-nm=(380 780 5)]`.
 pub fn validate_colorimetry(_file: Option<&Path>, p: &Params) -> Result<(), ParamError> {

@@ -306,6 +306,108 @@ pub fn film_spec(spec: &ResolvedExperiment, scene: &Scene) -> Result<FilmSpec> {
     Ok(scene.film.clone().unwrap_or_default())
 }
 
+/// Properties of a `lens` node with a file.
+const LENS_FILE_KEYS: &[&str] = &[
+    "film-distance-mm",
+    "focus-distance-m",
+    "rtf-degree",
+    "rtf-axis-weight",
+];
+/// Properties of an inline `lens model=…` node.
+const LENS_MODEL_KEYS: &[&str] = &[
+    "model",
+    "fov-deg",
+    "f-number",
+    "focal-length-mm",
+    "focus-distance-m",
+];
+
+/// `rtf-degree`: N fits an RTF of degree N to the prescription and renders
+/// through it; absent or "none" traces the file as it is (so a sweep can
+/// compare both).
+fn rtf_degree(p: &crate::params::Params) -> std::result::Result<Option<usize>, String> {
+    match p.get("rtf-degree") {
+        None => Ok(None),
+        Some(Value::String(s)) if s == "none" => Ok(None),
+        Some(Value::Number(d)) if d.fract() == 0.0 && (1.0..=16.0).contains(d) => {
+            Ok(Some(*d as usize))
+        }
+        Some(v) => Err(format!(
+            "rtf-degree = {v}; expected a whole number 1…16 or \"none\""
+        )),
+    }
+}
+
+/// Check-time validator of an experiment's `lens` section (registered in
+/// `hooks::install_defaults`): the same names and values `build_camera`
+/// accepts, reported at the property's `file:line:col`.
+pub fn validate_lens(
+    file: Option<&Path>,
+    p: &crate::params::Params,
+) -> std::result::Result<(), super::hooks::ParamError> {
+    use super::hooks::ParamError;
+    let positive = |k: &str| -> std::result::Result<(), ParamError> {
+        match p.f64(k) {
+            Ok(Some(x)) if !(x > 0.0 && x.is_finite()) => Err(ParamError::new(
+                Some(k),
+                format!("'{k}' must be a positive number, found {x}"),
+            )
+            .at_value()),
+            Err(e) => Err(ParamError::new(Some(k), e).at_value()),
+            _ => Ok(()),
+        }
+    };
+    let Some(file) = file else {
+        if let Some(u) = p.unknown(LENS_MODEL_KEYS).first() {
+            return Err(ParamError::unknown(u, LENS_MODEL_KEYS));
+        }
+        for k in ["fov-deg", "f-number", "focal-length-mm", "focus-distance-m"] {
+            positive(k)?;
+        }
+        return match p.str("model") {
+            Ok(None | Some("pinhole")) if p.get("fov-deg").is_none() => Err(ParamError::new(
+                None,
+                "lens model=\"pinhole\" needs fov-deg",
+            )),
+            Ok(Some("thin-lens")) if p.get("focal-length-mm").is_none() => Err(ParamError::new(
+                None,
+                "lens model=\"thin-lens\" needs focal-length-mm",
+            )),
+            Ok(None | Some("pinhole" | "thin-lens")) => Ok(()),
+            Ok(Some(other)) => Err(ParamError::new(
+                Some("model"),
+                format!(
+                    "lens model '{other}': expected \"pinhole\" or \"thin-lens\", or a lens file"
+                ),
+            )
+            .at_value()),
+            Err(e) => Err(ParamError::new(Some("model"), e).at_value()),
+        };
+    };
+    if let Some(u) = p.unknown(LENS_FILE_KEYS).first() {
+        return Err(ParamError::unknown(u, LENS_FILE_KEYS));
+    }
+    for k in ["film-distance-mm", "focus-distance-m", "rtf-axis-weight"] {
+        positive(k)?;
+    }
+    let degree = rtf_degree(p).map_err(|e| ParamError::new(Some("rtf-degree"), e).at_value())?;
+    match degree {
+        None if p.get("rtf-axis-weight").is_some() => Err(ParamError::new(
+            Some("rtf-axis-weight"),
+            "rtf-axis-weight needs rtf-degree",
+        )),
+        Some(_) => match crate::optics::analysis::load_lens(file) {
+            Ok(crate::optics::analysis::LensFile::Rtf(_)) => Err(ParamError::new(
+                Some("rtf-degree"),
+                "rtf-degree needs a lens prescription to fit, and this file is an RTF",
+            )),
+            Ok(_) => Ok(()),
+            Err(e) => Err(ParamError::new(None, e.to_string())),
+        },
+        None => Ok(()),
+    }
+}
+
 /// Build the camera (lens model + pose) of a variant: a lens file (prescription
 /// or RTF) with `film-distance-mm` / `focus-distance-m`, an inline
 /// `lens model="pinhole" fov-deg=… f-number=…` or
@@ -318,35 +420,15 @@ pub fn build_camera(spec: &ResolvedExperiment, scene: &Scene) -> Result<Box<dyn 
         let fd_mm = p.f64("film-distance-mm").map_err(Error::invalid)?;
         let focus_m = p.f64("focus-distance-m").map_err(Error::invalid)?;
         if let Some(f) = &l.file {
-            const KEYS: [&str; 4] = [
-                "film-distance-mm",
-                "focus-distance-m",
-                "rtf-degree",
-                "rtf-axis-weight",
-            ];
-            if let Some(u) = p.unknown(&KEYS).first() {
+            if let Some(u) = p.unknown(LENS_FILE_KEYS).first() {
                 return Err(Error::invalid(format!(
                     "lens '{}': unknown property '{u}'; a lens file takes {}",
                     f.written,
-                    KEYS.join(", ")
+                    LENS_FILE_KEYS.join(", ")
                 )));
             }
-            // rtf-degree=N renders the prescription through an RTF of degree
-            // N fitted to it; "none" (the default) traces the file as it is,
-            // so a sweep can compare both.
-            let degree = match p.get("rtf-degree") {
-                None => None,
-                Some(Value::String(s)) if s == "none" => None,
-                Some(Value::Number(d)) if d.fract() == 0.0 && (1.0..=16.0).contains(d) => {
-                    Some(*d as usize)
-                }
-                Some(v) => {
-                    return Err(Error::invalid(format!(
-                        "lens '{}': rtf-degree = {v}; expected a whole number 1…16 or \"none\"",
-                        f.written
-                    )));
-                }
-            };
+            let degree =
+                rtf_degree(p).map_err(|e| Error::invalid(format!("lens '{}': {e}", f.written)))?;
             let axis_weight = p.f64("rtf-axis-weight").map_err(Error::invalid)?;
             if let Some(d) = degree {
                 return crate::optics::analysis::fitted_rtf_camera(

@@ -1165,6 +1165,31 @@ pub fn read_ri_csv(p: &Path) -> Result<(Vec<f64>, Vec<f64>), String> {
     Ok((h, v))
 }
 
+/// Check-time validator of an experiment's `sensor` section (registered in
+/// `experiment::hooks::install_defaults`): the file (or the generic sensor)
+/// with each inline override applied in turn, so an unknown or out-of-range
+/// property is reported at its own `file:line:col` before anything runs.
+pub fn validate_overrides(
+    file: Option<&Path>,
+    p: &Params,
+) -> std::result::Result<(), crate::experiment::hooks::ParamError> {
+    use crate::experiment::hooks::ParamError;
+    let mut cfg = match file {
+        Some(f) => SensorConfig::load(f).map_err(|e| ParamError::new(None, e.to_string()))?,
+        None => SensorConfig::generic(),
+    };
+    for (k, v) in &p.0 {
+        if BLOCK_NAMES.contains(&k.as_str()) {
+            return Err(ParamError::new(
+                Some(k),
+                format!("'{k}' is a block and can only be set in the sensor file"),
+            ));
+        }
+        cfg.set(k, v).map_err(|e| ParamError::new(Some(k), e))?;
+    }
+    cfg.validate().map_err(|e| ParamError::new(None, e))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
