@@ -206,3 +206,29 @@ fn optics_cli_fit_rtf_sampling_flags() {
         assert_ne!(read(&p), read(&base), "{extra:?} did not change the fit");
     }
 }
+
+/// Same prescription and options → byte-identical RTF for any thread count
+/// (the traced bundles are collected in order; the least squares is serial).
+#[test]
+fn optics_cli_fit_rtf_is_thread_count_independent() {
+    let dir = tempfile::tempdir().unwrap();
+    let fit = |threads: &str| {
+        let p = dir.path().join(format!("t{threads}.json"));
+        let o = Command::new(env!("CARGO_BIN_EXE_camsim"))
+            .args([
+                "lens",
+                "fit-rtf",
+                "lenses/prescriptions/dgauss.28deg-zemax.json",
+                "--degree",
+                "4",
+                "--out",
+                p.to_str().unwrap(),
+            ])
+            .env("RAYON_NUM_THREADS", threads)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        std::fs::read(p).unwrap()
+    };
+    assert!(fit("1") == fit("3"), "RTF differs between 1 and 3 threads");
+}
