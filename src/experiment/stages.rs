@@ -338,9 +338,9 @@ fn rtf_degree(p: &crate::params::Params) -> std::result::Result<Option<usize>, S
     }
 }
 
-/// Check-time validator of an experiment's `lens` section (registered in
-/// `hooks::install_defaults`): the same names and values `build_camera`
-/// accepts, reported at the property's `file:line:col`.
+/// Check-time validator of an experiment's `lens` section (built into
+/// `hooks::validator`): the same names and values `build_camera` accepts,
+/// reported at the property's `file:line:col`.
 pub fn validate_lens(
     file: Option<&Path>,
     p: &crate::params::Params,

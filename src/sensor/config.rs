@@ -1165,8 +1165,8 @@ pub fn read_ri_csv(p: &Path) -> Result<(Vec<f64>, Vec<f64>), String> {
     Ok((h, v))
 }
 
-/// Check-time validator of an experiment's `sensor` section (registered in
-/// `experiment::hooks::install_defaults`): the file (or the generic sensor)
+/// Check-time validator of an experiment's `sensor` section (built into
+/// `experiment::hooks::validator`): the file (or the generic sensor)
 /// with each inline override applied in turn, so an unknown or out-of-range
 /// property is reported at its own `file:line:col` before anything runs.
 pub fn validate_overrides(
