@@ -6,7 +6,7 @@
 //! - [`parse`]: KDL → spec, strictly, with diagnostics; `base` includes
 //! - [`apply`]: typed values and parameter paths (shared by parser and sweeps)
 //! - [`sweep`]: axes, zip groups, ranges, variant ids
-//! - [`plan`]: variants + input hashes, JSON
+//! - [`plan`](mod@plan): variants + input hashes, JSON
 //! - [`measured`]: captured images (`measured` nodes), `compare`, `convergence`
 //! - [`stages`]: scene → camera → render → sensor → measure (one function each)
 //! - [`run`]: the runner (resume, shards, interruption)

@@ -321,7 +321,7 @@ pub struct LstsqSolution {
     pub condition_number: f64,
 }
 
-/// Householder QR with column pivoting. `cols` is column-major (cols[j][i]),
+/// Householder QR with column pivoting. `cols` is column-major (`cols[j][i]`),
 /// m rows; each `rhs[k]` has m entries.
 pub fn lstsq_qr(mut cols: Vec<Vec<f64>>, mut rhs: Vec<Vec<f64>>) -> Result<LstsqSolution> {
     let n = cols.len();

@@ -177,7 +177,7 @@ pub struct SensorConfig {
     pub qe: Vec<Spectrum>,
     pub ir_filter_ref: String,
     pub ir_filter: Spectrum,
-    /// Optional correction matrix: effective_c = Σ_n (qe_n · ir) · M[n][c] (paper Eq. 2).
+    /// Optional correction matrix: effective_c = Σ_n (qe_n · ir) · `M[n][c]` (paper Eq. 2).
     pub qe_matrix: Option<Vec<Vec<f64>>>,
     pub well_capacity_e: f64,
     pub voltage_swing_v: f64,

@@ -8,7 +8,7 @@
 //! - [`nnls`]: Lawson–Hanson NNLS and the paper's QE correction matrix (Eq. 2–3);
 //! - [`calibrate`]: Appendix III conversion gain, EMVA 1288 photon transfer;
 //! - [`flatfield`]: flat-field sequences on disk (simulate → PNG + settings.csv → read);
-//! - [`bench`]: the full-frame speed benchmark.
+//! - [`bench`](mod@bench): the full-frame speed benchmark.
 
 pub mod bench;
 pub mod calibrate;

@@ -47,7 +47,7 @@ pub struct SensorFrame {
 }
 
 /// Electrons per second per unit irradiance, per channel and band:
-/// w[c][b] = QE_c(λ_b)·λ_b/(hc)·Δλ·A_pixel·FF  [e⁻/s per W/(m²·nm)].
+/// `w[c][b]` = QE_c(λ_b)·λ_b/(hc)·Δλ·A_pixel·FF, in e⁻/s per W/(m²·nm).
 #[allow(clippy::needless_range_loop)]
 pub fn channel_weights(cfg: &SensorConfig, grid: &WavelengthGrid) -> Vec<Vec<f64>> {
     let nch = cfg.cfa.channels.len();

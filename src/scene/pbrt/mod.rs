@@ -9,7 +9,7 @@
 //! Modules: [`lexer`] (tokens with byte spans), [`params`] (typed parameter lists,
 //! spectra), [`parser`] (directives, graphics state, includes), [`to_scene`]
 //! (mapping onto the scene model), PLY via [`crate::scene::mesh_io::read_ply`], [`subdiv`], [`paper`] (the paper's
-//! spectra for the ISET Cornell box), [`bench`].
+//! spectra for the ISET Cornell box), [`bench`](mod@bench).
 //!
 //! ## Object labels
 //! Every shape gets an object label (`Scene::objects`), chosen in this order:
