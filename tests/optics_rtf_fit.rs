@@ -37,7 +37,7 @@
 mod common;
 
 use camsim::optics::Camera;
-use camsim::optics::analysis::{edge_spread, film_residuals, relative_illumination};
+use camsim::optics::analysis::{edge_spread, esf_rmse, film_residuals, relative_illumination};
 use camsim::optics::fit::{
     DataSampling, FitOptions, PassMethod, Sample, Weighting, film_bundle_samples, fit_polys,
     fit_rtf, fit_rtf_degrees,
@@ -77,19 +77,6 @@ fn interp(t: &[(f64, f64)], x: f64) -> f64 {
     let k = t.partition_point(|p| p.0 <= x).clamp(1, t.len() - 1);
     let (a, b) = (t[k - 1], t[k]);
     a.1 + (b.1 - a.1) * (x - a.0) / (b.0 - a.0)
-}
-
-fn rmse_norm(a: &[f64], reference: &[f64]) -> f64 {
-    let mut top: Vec<f64> = reference.to_vec();
-    top.sort_by(|x, y| y.total_cmp(x));
-    let norm = top.iter().take(10).sum::<f64>() / 10.0;
-    (a.iter()
-        .zip(reference)
-        .map(|(x, y)| (x - y).powi(2))
-        .sum::<f64>()
-        / a.len() as f64)
-        .sqrt()
-        / norm
 }
 
 struct Row {
@@ -174,7 +161,7 @@ fn evaluate(case: &Case, rows: &mut Vec<Row>) {
         esf_rmse_vs_prescription: 0.0,
         esf_off_axis: [0.0; 3],
         ri_err_vs_zemax: ri_vs_zemax(&ri_p),
-        esf_rmse_vs_zemax: rmse_norm(&esf_p, &zemax_esf_v),
+        esf_rmse_vs_zemax: esf_rmse(&esf_p, &zemax_esf_v),
         cond: f64::NAN,
         film_rms_um: film_p.rms_um,
         film_max_um: film_p.max_um,
@@ -184,7 +171,7 @@ fn evaluate(case: &Case, rows: &mut Vec<Row>) {
         let cam_esf = RtfCamera::new(rtf.clone(), film_esf).unwrap();
         let esf_r = esf_of(&cam_esf);
         let esf_off_axis: [f64; 3] =
-            std::array::from_fn(|k| rmse_norm(&esf_at(&cam_esf, off_fields[k]), &esf_off_p[k]));
+            std::array::from_fn(|k| esf_rmse(&esf_at(&cam_esf, off_fields[k]), &esf_off_p[k]));
         let film = film_of(&RtfCamera::new(rtf.clone(), bfd).unwrap());
         let ri_err = ri_r
             .iter()
@@ -195,10 +182,10 @@ fn evaluate(case: &Case, rows: &mut Vec<Row>) {
             lens: case.name,
             model,
             ri_err_vs_prescription: ri_err,
-            esf_rmse_vs_prescription: rmse_norm(&esf_r, &esf_p),
+            esf_rmse_vs_prescription: esf_rmse(&esf_r, &esf_p),
             esf_off_axis,
             ri_err_vs_zemax: ri_vs_zemax(&ri_r),
-            esf_rmse_vs_zemax: rmse_norm(&esf_r, &zemax_esf_v),
+            esf_rmse_vs_zemax: esf_rmse(&esf_r, &zemax_esf_v),
             cond,
             film_rms_um: film.rms_um,
             film_max_um: film.max_um,
@@ -292,7 +279,7 @@ fn evaluate(case: &Case, rows: &mut Vec<Row>) {
         let outz = rtf.waves[0].outputs[2].as_mut().unwrap();
         outz.coeff[0] -= shift;
         let esf_shifted = esf_of(&RtfCamera::new(rtf, film_esf).unwrap());
-        let err = rmse_norm(&esf_shifted, &esf_p);
+        let err = esf_rmse(&esf_shifted, &esf_p);
         println!(
             "{}: ESF RMSE with the output plane moved by planeoffsetinput ({shift:.2} mm): {err:.4}",
             case.name

@@ -127,11 +127,12 @@ pub fn lens_camera(
 ) -> Result<LensCamera> {
     match lens {
         LensFile::Prescription(p) => {
-            let d = match (film_distance_mm, focus_from_film_m) {
-                (Some(d), _) => d,
-                (None, Some(z)) => p.film_distance_for_focus_mm(z * 1e3, wavelength_nm)?,
-                (None, None) => p.film_distance_for_focus_mm(f64::INFINITY, wavelength_nm)?,
-            };
+            let d = prescription_film_distance_mm(
+                &p,
+                film_distance_mm,
+                focus_from_film_m,
+                wavelength_nm,
+            )?;
             Ok(LensCamera::Prescription(PrescriptionCamera::new(
                 p,
                 d,
@@ -151,6 +152,22 @@ pub fn lens_camera(
             };
             Ok(LensCamera::Rtf(RtfCamera::new(r, d)?))
         }
+    }
+}
+
+/// A prescription's film distance (mm behind the rear vertex): the one given,
+/// else the one focusing `focus_from_film_m` (measured from the film), else
+/// infinity focus.
+pub fn prescription_film_distance_mm(
+    p: &Prescription,
+    film_distance_mm: Option<f64>,
+    focus_from_film_m: Option<f64>,
+    wavelength_nm: f64,
+) -> Result<f64> {
+    match (film_distance_mm, focus_from_film_m) {
+        (Some(d), _) => Ok(d),
+        (None, Some(z)) => p.film_distance_for_focus_mm(z * 1e3, wavelength_nm),
+        (None, None) => p.film_distance_for_focus_mm(f64::INFINITY, wavelength_nm),
     }
 }
 
@@ -203,15 +220,12 @@ pub fn fitted_rtf_camera(
             path.display()
         )));
     };
-    let LensCamera::Prescription(pc) = lens_camera(
-        LensFile::Prescription(p.clone()),
+    let film_mm = prescription_film_distance_mm(
+        &p,
         film_distance_m.map(|d| d * 1e3),
         focus_distance_m,
         DEFAULT_WAVELENGTH_NM,
-    )?
-    else {
-        unreachable!("a prescription gives a prescription camera")
-    };
+    )?;
     let waves: Vec<f64> = if p.is_dispersive() {
         (0..=6).map(|k| 400.0 + 50.0 * k as f64).collect()
     } else {
@@ -224,7 +238,7 @@ pub fn fitted_rtf_camera(
     };
     let (rtf, _) = crate::optics::fit::fit_rtf(&p, &waves, &opts)
         .map_err(|e| Error::Invalid(format!("{}: fitting the RTF: {e}", path.display())))?;
-    Ok(Box::new(RtfCamera::new(rtf, pc.film_distance_mm)?))
+    Ok(Box::new(RtfCamera::new(rtf, film_mm)?))
 }
 
 /// Film distance at which an RTF images infinity: rays from the on-axis film
@@ -598,6 +612,20 @@ pub fn film_residuals(
     })
 }
 
+/// RMS difference of two ESFs sampled at the same positions, normalised by
+/// the mean of the 10 largest `reference` values (the RTF metric).
+pub fn esf_rmse(esf: &[f64], reference: &[f64]) -> f64 {
+    let mut top: Vec<f64> = reference.to_vec();
+    top.sort_by(|x, y| y.total_cmp(x));
+    let norm = top.iter().take(10).sum::<f64>() / 10.0;
+    let ss = esf
+        .iter()
+        .zip(reference)
+        .map(|(x, y)| (x - y).powi(2))
+        .sum::<f64>();
+    (ss / esf.len() as f64).sqrt() / norm
+}
+
 /// How closely a fitted RTF reproduces the prescription it was fitted to,
 /// in image terms (`fit-rtf` prints it).
 #[derive(Clone, Debug, PartialEq)]
@@ -641,8 +669,8 @@ pub fn validate_rtf(lens: &Prescription, rtf: &Rtf, wavelength_nm: f64) -> Resul
     let presc = PrescriptionCamera::new(lens.clone(), film, wavelength_nm)?;
     let cam = RtfCamera::new(rtf.clone(), film)?;
     let z_obj = film + lens.total_track_mm() + object_mm;
-    let mut esf_rmse = [f64::NAN; 4];
-    for (k, e) in esf_rmse.iter_mut().enumerate() {
+    let mut esf_err = [f64::NAN; 4];
+    for (k, e) in esf_err.iter_mut().enumerate() {
         let field = r_hi / 0.95 * 0.25 * k as f64;
         let w = (1.5 * blur_half_width_um(&presc, z_obj, field, wavelength_nm)).max(2.0);
         let pos: Vec<f64> = (0..=200).map(|i| -w + 2.0 * w * i as f64 / 200.0).collect();
@@ -652,17 +680,13 @@ pub fn validate_rtf(lens: &Prescription, rtf: &Rtf, wavelength_nm: f64) -> Resul
                 .map(|v| v.into_iter().map(|x| x.0).collect())
         };
         if let (Some(a), Some(b)) = (esf(&presc), esf(&cam)) {
-            let mut top = a.clone();
-            top.sort_by(|x, y| y.total_cmp(x));
-            let norm = top.iter().take(10).sum::<f64>() / 10.0;
-            let ss = a.iter().zip(&b).map(|(x, y)| (x - y).powi(2)).sum::<f64>();
-            *e = (ss / a.len() as f64).sqrt() / norm;
+            *e = esf_rmse(&b, &a);
         }
     }
     Ok(RtfValidation {
         wavelength_nm,
         ri_max_abs_err,
         object_mm,
-        esf_rmse,
+        esf_rmse: esf_err,
     })
 }
