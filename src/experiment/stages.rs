@@ -420,17 +420,12 @@ pub fn build_camera(spec: &ResolvedExperiment, scene: &Scene) -> Result<Box<dyn 
         let fd_mm = p.f64("film-distance-mm").map_err(Error::invalid)?;
         let focus_m = p.f64("focus-distance-m").map_err(Error::invalid)?;
         if let Some(f) = &l.file {
-            if let Some(u) = p.unknown(LENS_FILE_KEYS).first() {
-                return Err(Error::invalid(format!(
-                    "lens '{}': unknown property '{u}'; a lens file takes {}",
-                    f.written,
-                    LENS_FILE_KEYS.join(", ")
-                )));
-            }
-            let degree =
-                rtf_degree(p).map_err(|e| Error::invalid(format!("lens '{}': {e}", f.written)))?;
-            let axis_weight = p.f64("rtf-axis-weight").map_err(Error::invalid)?;
-            if let Some(d) = degree {
+            // The check-time validator is the one list of names and values
+            // (variants built without `parse`/`plan` get the same checks).
+            validate_lens(Some(&f.path), p)
+                .map_err(|e| Error::invalid(format!("lens '{}': {}", f.written, e.message)))?;
+            if let Some(d) = rtf_degree(p).map_err(Error::invalid)? {
+                let axis_weight = p.f64("rtf-axis-weight").map_err(Error::invalid)?;
                 return crate::optics::analysis::fitted_rtf_camera(
                     &f.path,
                     fd_mm.map(|d| d * 1e-3),
@@ -438,12 +433,6 @@ pub fn build_camera(spec: &ResolvedExperiment, scene: &Scene) -> Result<Box<dyn 
                     d,
                     axis_weight.unwrap_or(1.0),
                 );
-            }
-            if axis_weight.is_some() {
-                return Err(Error::invalid(format!(
-                    "lens '{}': rtf-axis-weight needs rtf-degree",
-                    f.written
-                )));
             }
             return crate::optics::analysis::load_lens_camera(
                 &f.path,
