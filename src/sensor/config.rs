@@ -658,15 +658,22 @@ impl SensorConfig {
     /// Apply inline overrides (experiment `sensor "…" exposure-s=0.2`). Names are the
     /// scalar names of the file format; unknown names get a suggestion.
     pub fn apply_overrides(&mut self, p: &Params) -> Result<(), String> {
+        self.apply_overrides_at(p).map_err(|(_, e)| e)
+    }
+
+    /// As `apply_overrides`; an error names the property it is about (None:
+    /// the cross-field checks).
+    fn apply_overrides_at<'a>(&mut self, p: &'a Params) -> Result<(), (Option<&'a str>, String)> {
         for (k, v) in &p.0 {
             if BLOCK_NAMES.contains(&k.as_str()) {
-                return Err(format!(
-                    "'{k}' is a block and can only be set in the sensor file"
+                return Err((
+                    Some(k),
+                    format!("'{k}' is a block and can only be set in the sensor file"),
                 ));
             }
-            self.set(k, v)?;
+            self.set(k, v).map_err(|e| (Some(k.as_str()), e))?;
         }
-        self.validate()
+        self.validate().map_err(|e| (None, e))
     }
 
     /// Read and validate a sensor file.
@@ -1178,16 +1185,8 @@ pub fn validate_overrides(
         Some(f) => SensorConfig::load(f).map_err(|e| ParamError::new(None, e.to_string()))?,
         None => SensorConfig::generic(),
     };
-    for (k, v) in &p.0 {
-        if BLOCK_NAMES.contains(&k.as_str()) {
-            return Err(ParamError::new(
-                Some(k),
-                format!("'{k}' is a block and can only be set in the sensor file"),
-            ));
-        }
-        cfg.set(k, v).map_err(|e| ParamError::new(Some(k), e))?;
-    }
-    cfg.validate().map_err(|e| ParamError::new(None, e))
+    cfg.apply_overrides_at(p)
+        .map_err(|(k, e)| ParamError::new(k, e))
 }
 
 #[cfg(test)]
