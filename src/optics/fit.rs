@@ -1189,7 +1189,7 @@ pub fn fit_rtf_degrees(
             m => ellipses(m)?,
         };
         // Polynomial data, grouped in bundles (one film point or input
-        // radius each); `axis[g]`: bundle g is on the axis.
+        // radius each), each with whether it lies on the axis.
         let fields: Vec<f64> = (0..opts.n_field)
             .map(|k| r_last * k as f64 / (opts.n_field - 1) as f64)
             .collect();
