@@ -37,6 +37,10 @@ pub struct RunArgs {
     pub threads: Option<usize>,
     #[arg(long)]
     pub seed: Option<u64>,
+    /// Cap every variant's samples per pixel at N (a quicker, noisier run of the
+    /// same experiments; the cap is part of each variant's input hash).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_spp: Option<u64>,
     /// Run shard i of n (1-based), e.g. --shard 2/8.
     #[arg(long)]
     pub shard: Option<String>,
@@ -209,6 +213,7 @@ pub fn run(a: RunArgs) -> Result<i32> {
         out: a.out.clone(),
         threads,
         seed: a.seed,
+        max_spp: a.max_spp,
         shard,
         interrupted: interrupted.clone(),
     };

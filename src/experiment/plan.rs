@@ -36,16 +36,40 @@ pub struct Plan {
     pub variants: Vec<PlannedVariant>,
 }
 
+/// Run-wide replacements applied to every variant before hashing (`camsim run
+/// --seed S --max-spp N`): they change the resolved spec, so the input hash.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PlanOverrides {
+    /// Replaces `render.seed`.
+    pub seed: Option<u64>,
+    /// Caps `render.spp` (a quicker run of the same experiment, e.g. the test baselines).
+    pub max_spp: Option<u64>,
+}
+
 /// Expand and check every variant. `seed` replaces `render.seed` everywhere.
 pub fn plan(parsed: &Parsed, seed: Option<u64>) -> Result<Plan, Located> {
+    plan_with(
+        parsed,
+        PlanOverrides {
+            seed,
+            ..Default::default()
+        },
+    )
+}
+
+/// [`plan`] with run-wide overrides.
+pub fn plan_with(parsed: &Parsed, o: PlanOverrides) -> Result<Plan, Located> {
     let mut variants = sweep::expand(&parsed.spec, &parsed.sweep, parsed.loader)
         .map_err(|(s, e)| parsed.sources.error(s, e.message).with_help_opt(e.help))?;
     let mut out = Vec::with_capacity(variants.len());
     let mut file_digests = std::collections::BTreeMap::new();
     for v in variants.drain(..) {
         let mut v = v;
-        if let Some(s) = seed {
+        if let Some(s) = o.seed {
             v.spec.render.seed = s;
+        }
+        if let Some(n) = o.max_spp {
+            v.spec.render.spp = v.spec.render.spp.min(n.max(1));
         }
         if !parsed.sweep.items.is_empty() {
             validate_hooks(&v.spec).map_err(|(s, e)| {

@@ -30,6 +30,8 @@ pub struct RunOptions {
     pub out: PathBuf,
     pub threads: usize,
     pub seed: Option<u64>,
+    /// Caps every variant's `render.spp` (`--max-spp`).
+    pub max_spp: Option<u64>,
     /// (i, n), 1-based i.
     pub shard: Option<(usize, usize)>,
     /// Set by a Ctrl-C handler: stop after the variant in flight.
@@ -330,6 +332,12 @@ pub fn run_parsed(
     opts: &RunOptions,
     progress: &mut dyn Progress,
 ) -> Result<Summary> {
-    let plan = super::plan::plan(parsed, opts.seed)?;
+    let plan = super::plan::plan_with(
+        parsed,
+        super::plan::PlanOverrides {
+            seed: opts.seed,
+            max_spp: opts.max_spp,
+        },
+    )?;
     run_plan(&plan, opts, progress)
 }

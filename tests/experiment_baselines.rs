@@ -1,0 +1,140 @@
+//! Baselines of the shipped experiments (`experiments/*.kdl`): each runs end to
+//! end at a test quality (`camsim run --max-spp 64` for most, see [`max_spp`]; the files' own seeds) and
+//! its `results.csv` is compared with the committed baseline in
+//! `tests/baselines/<experiment>/results.csv` by `camsim diff`'s rule: a figure
+//! fails when it moved by more than the family-wise 3σ threshold of the
+//! combined standard error *and* more than 0.1 % (`report::diff`), or when a
+//! figure is missing on either side (a failed variant writes no rows).
+//!
+//! Same binary, inputs and seeds give bit-identical figures, so on an unchanged
+//! tree every difference is 0; the statistical rule is what lets a change that
+//! reorders floating-point sums pass while a physics or parameter change
+//! (a dropped `materials="paper"`, a film distance in the wrong unit) fails.
+//!
+//! Regenerate after an intended change, then read the baseline's diff:
+//!
+//! ```sh
+//! CAMSIM_BLESS=1 cargo test --release --test experiment_baselines
+//! ```
+
+use camsim::report::diff::{DiffOptions, diff_rows};
+use camsim::report::results::read_results;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// The quality the baselines are run at: few enough samples that the whole
+/// set runs in about two minutes on 2 cores, enough that every SFR region
+/// clears its noise floor (ISO 12233 refuses an edge whose noise alone gives
+/// MTF > 0.5 at Nyquist). `rtf-vs-prescription` needs its shipped 256 spp:
+/// its 5.6 µm pixels see a dim, bounce-lit edge (contrast/noise 7 at 64 spp).
+fn max_spp(experiment: &str) -> Option<&'static str> {
+    match experiment {
+        "rtf-vs-prescription" => None,
+        _ => Some("64"),
+    }
+}
+
+fn experiments() -> Vec<(String, PathBuf)> {
+    let mut v = vec![];
+    for e in std::fs::read_dir("experiments").unwrap() {
+        let p = e.unwrap().path();
+        if p.extension().is_some_and(|x| x == "kdl") {
+            let text = std::fs::read_to_string(&p).unwrap();
+            // setups (shared bases) are not run on their own
+            let top = text
+                .lines()
+                .map(str::trim)
+                .find(|l| !l.is_empty() && !l.starts_with("//"))
+                .unwrap_or("");
+            if top.starts_with("experiment") {
+                let name = top.split('"').nth(1).unwrap().to_string();
+                v.push((name, p));
+            }
+        }
+    }
+    v.sort();
+    v
+}
+
+fn run(name: &str, file: &Path, out: &Path) {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_camsim"));
+    c.args(["run", "--threads", "2", "--out"]).arg(out);
+    if let Some(n) = max_spp(name) {
+        c.args(["--max-spp", n]);
+    }
+    let o = c.arg(file).output().unwrap();
+    assert!(
+        o.status.success(),
+        "{}: camsim run failed ({}):\n{}",
+        file.display(),
+        o.status,
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+#[test]
+fn shipped_experiments_match_their_baselines() {
+    let tmp = tempfile::tempdir().unwrap();
+    let bless = std::env::var_os("CAMSIM_BLESS").is_some();
+    let exps = experiments();
+    assert!(
+        exps.len() >= 4,
+        "experiments/ holds {} experiments",
+        exps.len()
+    );
+    let mut failures = vec![];
+    for (name, file) in &exps {
+        run(name, file, tmp.path());
+        let got = tmp.path().join(name).join("results.csv");
+        let base = Path::new("tests/baselines").join(name).join("results.csv");
+        if bless {
+            std::fs::create_dir_all(base.parent().unwrap()).unwrap();
+            std::fs::copy(&got, &base).unwrap();
+            eprintln!("blessed {}", base.display());
+            continue;
+        }
+        assert!(
+            base.exists(),
+            "{name}: no baseline {}; create it with CAMSIM_BLESS=1 cargo test --release --test experiment_baselines",
+            base.display()
+        );
+        let a = read_results(&base).unwrap();
+        let b = read_results(&got).unwrap();
+        let d = diff_rows(&a, &b, &DiffOptions::default());
+        let sig: Vec<String> = d
+            .changes
+            .iter()
+            .filter(|c| c.significant)
+            .map(|c| {
+                format!(
+                    "{}/{} {}.{}: {} ± {} → {} ± {} (z = {:.1})",
+                    c.experiment,
+                    c.variant,
+                    c.measurement,
+                    c.quantity,
+                    c.a,
+                    c.se_a,
+                    c.b,
+                    c.se_b,
+                    c.z
+                )
+            })
+            .collect();
+        if !sig.is_empty() || !d.only_a.is_empty() || !d.only_b.is_empty() {
+            failures.push(format!(
+                "{name}: {} significant change(s) of {} compared (z > {:.2}):\n  {}\n  only in the baseline: {:?}\n  only in this run: {:?}",
+                sig.len(),
+                d.compared,
+                d.z_threshold,
+                sig.join("\n  "),
+                d.only_a,
+                d.only_b
+            ));
+        }
+    }
+    assert!(
+        failures.is_empty(),
+        "{}\n(an intended change? regenerate with CAMSIM_BLESS=1 cargo test --release --test experiment_baselines and review the diff)",
+        failures.join("\n")
+    );
+}
