@@ -24,6 +24,8 @@ struct Cli {
 enum Command {
     /// Validate experiment files (exit 0 when all are valid, 1 otherwise).
     Check(cli::experiment::CheckArgs),
+    /// Print every property of the experiment language (Markdown tables).
+    Params,
     /// List the expanded variants of an experiment with their resolved parameters.
     Plan(cli::experiment::PlanArgs),
     /// Run experiments (default: the embedded experiments/ directory).
@@ -65,6 +67,10 @@ fn main() {
     };
     let result = match cli.command {
         Command::Check(a) => cli::experiment::check(a),
+        Command::Params => {
+            print!("{}", camsim::experiment::language::markdown());
+            Ok(0)
+        }
         Command::Plan(a) => cli::experiment::plan(a),
         Command::Run(a) => cli::experiment::run(a),
         Command::Merge(a) => cli::experiment::merge(a),

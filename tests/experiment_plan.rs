@@ -199,3 +199,51 @@ fn hashes_do_not_depend_on_how_the_file_is_reached() {
     let d = experiment::plan(&p, None).unwrap();
     assert_ne!(a.variants[0].hash, d.variants[0].hash);
 }
+
+/// A base is merged as a whole value: every shipped experiment that uses a
+/// base plans to the same resolved parameters and the same variant hashes as
+/// the same experiment written out inline (`tests/experiments/inline/<name>.kdl`,
+/// parsed as if it stood where the shipped file stands, so relative paths
+/// resolve alike). Only the list of bases differs.
+#[test]
+fn based_experiments_plan_like_their_inline_versions() {
+    let mut checked = 0;
+    for e in std::fs::read_dir("experiments").unwrap() {
+        let path = e.unwrap().path();
+        let text = std::fs::read_to_string(&path).unwrap();
+        let based = text.lines().any(|l| l.trim_start().starts_with("base "));
+        if !based || !text.contains("experiment \"") {
+            continue;
+        }
+        let name = path.file_name().unwrap().to_str().unwrap();
+        let inline_path = Path::new("tests/experiments/inline").join(name);
+        let inline = std::fs::read_to_string(&inline_path).unwrap_or_else(|_| {
+            panic!(
+                "{} uses a base: write it out inline as {}",
+                path.display(),
+                inline_path.display()
+            )
+        });
+        let a = experiment::parse_file(&path, Loader::Disk).unwrap_or_else(|e| panic!("{e}"));
+        let b =
+            experiment::parse_source(&path, inline, Loader::Disk).unwrap_or_else(|e| panic!("{e}"));
+        assert!(!a.spec.bases.is_empty() && b.spec.bases.is_empty());
+        let pa = experiment::plan(&a, None).unwrap();
+        let pb = experiment::plan(&b, None).unwrap();
+        assert_eq!(pa.variants.len(), pb.variants.len(), "{name}");
+        for (va, vb) in pa.variants.iter().zip(&pb.variants) {
+            let mut sa = va.variant.spec.clone();
+            sa.bases.clear();
+            // (compared as serialised: source spans differ by construction)
+            assert_eq!(
+                serde_json::to_string_pretty(&sa).unwrap(),
+                serde_json::to_string_pretty(&vb.variant.spec).unwrap(),
+                "{name} {}: resolved specs differ",
+                va.variant.id
+            );
+            assert_eq!(va.hash, vb.hash, "{name} {}: hashes differ", va.variant.id);
+        }
+        checked += 1;
+    }
+    assert!(checked >= 2, "only {checked} based experiments checked");
+}

@@ -526,6 +526,7 @@ fn c27_realistic_camera() {
             aperture_diameter_m,
             focus_distance_m,
             film_distance_m,
+            ..
         } => {
             assert_eq!(path, &dir().join("lenses/wide.22mm.dat"));
             assert_eq!(*aperture_diameter_m, Some(0.004));

@@ -4,7 +4,7 @@
 //! missing variant (run), an incomplete merge; 2 usage; 3 I/O or other errors.
 
 use camsim::experiment::run::{Outcome, Progress, RunOptions, parse_shard};
-use camsim::experiment::{self, DocKind, Loader, hooks};
+use camsim::experiment::{self, DocKind, Loader};
 use camsim::{Error, Result};
 use clap::Args;
 use std::io::IsTerminal;
@@ -56,7 +56,6 @@ pub struct MergeArgs {
 }
 
 pub fn check(a: CheckArgs) -> Result<i32> {
-    hooks::install_defaults();
     let mut bad = 0;
     for f in &collect(&a.files)? {
         match experiment::parse_file(f, Loader::Disk).and_then(|p| {
@@ -84,7 +83,6 @@ pub fn check(a: CheckArgs) -> Result<i32> {
 }
 
 pub fn plan(a: PlanArgs) -> Result<i32> {
-    hooks::install_defaults();
     let p = match experiment::parse_file(&a.file, Loader::Disk) {
         Ok(p) => p,
         Err(e) => {
@@ -181,7 +179,6 @@ impl Progress for Bar {
 }
 
 pub fn run(a: RunArgs) -> Result<i32> {
-    hooks::install_defaults();
     let shard = a.shard.as_deref().map(parse_shard).transpose()?;
     let threads = a.threads.unwrap_or_else(|| {
         std::thread::available_parallelism()

@@ -1,5 +1,4 @@
 use camsim::optical_image::Rect;
-use camsim::optics::pinhole::camera_from_spec;
 use camsim::render::{RenderSettings, output};
 use camsim::scene::FilmSpec;
 use camsim::scene::kdl_scene::load_kdl_scene;
@@ -107,7 +106,7 @@ pub fn render(a: RenderArgs) -> Result<i32> {
         sf.scene.camera.as_ref().ok_or_else(|| {
             Error::invalid(format!("{}: the scene has no camera", a.scene.display()))
         })?;
-    let camera = camera_from_spec(spec, &film)?;
+    let camera = camsim::optics::camera::build(&spec.model, &film)?;
     let settings = RenderSettings {
         spp: a.spp.or(sf.spp).unwrap_or(64),
         max_bounces: sf.max_bounces.unwrap_or(6),

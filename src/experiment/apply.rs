@@ -260,8 +260,6 @@ pub fn file_ref(
 pub const PATH_ROOTS: &[&str] = &[
     "render", "camera", "scene", "lens", "sensor", "object", "override", "measure", "tag",
 ];
-const RENDER_KEYS: &[&str] = &["spp", "max-bounces", "seed", "wavelength-nm"];
-const CAMERA_KEYS: &[&str] = &["position-m", "look-at-m", "up"];
 
 /// Set `value` at `path` in `spec`, with the same checks as when written in the file.
 pub fn apply(
@@ -305,7 +303,13 @@ pub fn apply(
             "max-bounces" => spec.render.max_bounces = as_int(v, "max-bounces", 0, 1000)? as u32,
             "seed" => spec.render.seed = as_int(v, "seed", 0, 1u64 << 53)?,
             "wavelength-nm" => spec.render.wavelength = as_grid(v, "wavelength-nm")?,
-            k => return Err(unknown_key(k, RENDER_KEYS, "render")),
+            k => {
+                return Err(unknown_key(
+                    k,
+                    &super::language::RENDER_SCHEMA.names(),
+                    "render",
+                ));
+            }
         },
         ["camera", key] => {
             let Some(cam) = spec.camera.as_mut() else {
@@ -319,7 +323,13 @@ pub fn apply(
                 "position-m" => cam.position_m = as_vec3(v, "position-m")?,
                 "look-at-m" => cam.look_at_m = as_vec3(v, "look-at-m")?,
                 "up" => cam.up = as_vec3(v, "up")?,
-                k => return Err(unknown_key(k, CAMERA_KEYS, "camera")),
+                k => {
+                    return Err(unknown_key(
+                        k,
+                        &super::language::CAMERA_SCHEMA.names(),
+                        "camera",
+                    ));
+                }
             }
             check_camera(cam)?;
         }

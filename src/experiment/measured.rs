@@ -242,7 +242,7 @@ fn known_and_single_of<'a>(
     example: &str,
 ) -> Result<&'a str, (Span, ApplyError)> {
     if let Some(u) = m.params.unknown(known).first() {
-        let e = crate::experiment::hooks::ParamError::unknown(u, known);
+        let e = crate::params::ParamError::unknown(u, known);
         return Err((
             m.spans.name_at(u, m.span),
             ApplyError {

@@ -11,13 +11,15 @@
 //! - [`stages`]: scene → camera → render → sensor → measure (one function each)
 //! - [`run`]: the runner (resume, shards, interruption)
 //! - [`results`]: CSV, manifest, merge
-//! - [`hooks`]: validators the sensor/lens/measurement modules register
+//! - [`language`]: every node's properties (schemas), the reference tables
+//! - [`check`]: every variant's stages built from their parameters at check time
 //!
 //! The language reference is `docs/experiment-language.md`.
 
 pub mod apply;
+pub mod check;
 pub mod embedded;
-pub mod hooks;
+pub mod language;
 pub mod measured;
 pub mod parse;
 pub mod plan;

@@ -9,7 +9,6 @@
 //! The language is documented in `docs/experiment-language.md`.
 
 use super::apply::{self, ApplyError};
-use super::hooks;
 use super::source::{Loader, SourceMap, Span, parse_kdl, skip_trivia};
 use super::spec::*;
 use super::sweep::{Axis, Sweep, SweepItem, range_values};
@@ -99,53 +98,9 @@ pub fn parse_source(path: &Path, text: String, loader: Loader) -> Result<Parsed,
     Ok(parsed)
 }
 
-/// Run the registered section validators (see [`hooks`]) on a resolved spec.
+/// Build every stage of a resolved spec from its parameters (see [`super::check`]).
 pub fn validate_hooks(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError)> {
-    let to_err = |e: hooks::ParamError, ps: &super::spec::PropSpans, whole: Span| {
-        let spans = if e.on_value { &ps.values } else { &ps.names };
-        let span = e
-            .name
-            .as_ref()
-            .and_then(|n| spans.get(n))
-            .copied()
-            .unwrap_or(whole);
-        (
-            span,
-            ApplyError {
-                message: e.message,
-                help: e.help,
-                on_path: false,
-            },
-        )
-    };
-    for (key, sec) in [("sensor", &spec.sensor), ("lens", &spec.lens)] {
-        if let (Some(s), Some(v)) = (sec, hooks::validator(key)) {
-            v(s.file.as_ref().map(|f| f.path.as_path()), &s.overrides)
-                .map_err(|e| to_err(e, &s.spans, s.span))?;
-        }
-    }
-    for m in &spec.measures {
-        if let Some(v) = hooks::validator(&format!("measure:{}", m.kind)) {
-            v(None, &m.params).map_err(|e| to_err(e, &m.spans, m.span))?;
-        }
-    }
-    for a in &spec.additions {
-        let key = match a.target {
-            Target::Mcc => "add:mcc",
-            Target::SlantedEdge => "add:slanted-edge",
-            Target::Mesh => "add:mesh",
-        };
-        if let Some(v) = hooks::validator(key) {
-            v(a.file.as_ref().map(|f| f.path.as_path()), &a.params)
-                .map_err(|e| to_err(e, &a.spans, a.span))?;
-        }
-    }
-    if let Some(v) = hooks::validator("override") {
-        for o in &spec.overrides {
-            v(None, &o.params).map_err(|e| to_err(e, &o.spans, o.span))?;
-        }
-    }
-    Ok(())
+    super::check::check_stages(spec)
 }
 
 struct P {
@@ -478,76 +433,36 @@ impl P {
             }
         }
         let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
-        let mut spec = ResolvedExperiment {
-            name: name.clone(),
-            file: path.clone(),
-            description: None,
-            bases: Vec::new(),
-            scene: None,
-            scene_materials: None,
-            additions: Vec::new(),
-            removals: Vec::new(),
-            overrides: Vec::new(),
-            camera: None,
-            lens: None,
-            sensor: None,
-            render: RenderSettings::default(),
-            measures: Vec::new(),
-            measured: Vec::new(),
-            tags: BTreeMap::new(),
-        };
         // Indexes for duplicate checks (linear scans would be quadratic in big files).
         let mut own_adds: std::collections::HashSet<String> = Default::default();
         let mut add_spans: std::collections::HashMap<String, Span> = Default::default();
         let mut removed: std::collections::HashSet<String> = Default::default();
         let mut override_at: std::collections::HashMap<String, usize> = Default::default();
         let mut measure_spans: std::collections::HashMap<String, Span> = Default::default();
-        if let Some(b) = children.nodes().iter().find(|n| n.name().value() == "base") {
-            self.no_children(file, b)?;
-            let (written, vspan) = self.single_string(file, b, "base file")?;
-            let Some(bpath) = apply::resolve_ref(&written, &dir, self.loader) else {
-                return Err(self
-                    .e(vspan, format!("base file '{written}' not found"))
-                    .with_help("relative paths are looked up in the directory of this file, then in each parent directory"));
-            };
-            let key = key_of(&bpath);
-            if let Some(i) = self.stack.iter().position(|k| *k == key) {
-                let chain: Vec<String> = self.stack[i..]
-                    .iter()
-                    .chain([&key])
-                    .map(|p| p.display().to_string())
-                    .collect();
-                return Err(self
-                    .e(vspan, format!("include cycle: {}", chain.join(" → ")))
-                    .with_help("a setup must not include itself, directly or indirectly"));
+        // A base is merged as a whole value: the experiment starts from the
+        // base's resolved spec and its own nodes change it, so no field of a
+        // setup can be forgotten on the way (a field-by-field copy once lost
+        // `materials="paper"`).
+        let mut spec = match children.nodes().iter().find(|n| n.name().value() == "base") {
+            Some(b) => {
+                self.no_children(file, b)?;
+                let (written, vspan) = self.single_string(file, b, "base file")?;
+                let bpath = self.base_path(&written, vspan, &dir)?;
+                let text = self.loader.read(&bpath).map_err(|e| {
+                    self.e(
+                        vspan,
+                        format!("cannot read base file '{}': {e}", bpath.display()),
+                    )
+                })?;
+                let bfile = self.map.add(bpath.clone(), text);
+                let (_, mut bspec, _) = self.parse_doc(bfile, Some(vspan))?;
+                bspec.bases.push(bpath);
+                bspec.name = name.clone();
+                bspec.file = path.clone();
+                bspec
             }
-            if self.stack.len() >= MAX_BASE_DEPTH {
-                return Err(self.e(
-                    vspan,
-                    format!("bases nested more than {MAX_BASE_DEPTH} deep"),
-                ));
-            }
-            let text = self.loader.read(&bpath).map_err(|e| {
-                self.e(
-                    vspan,
-                    format!("cannot read base file '{}': {e}", bpath.display()),
-                )
-            })?;
-            let bfile = self.map.add(bpath.clone(), text);
-            let (_, bspec, _) = self.parse_doc(bfile, Some(vspan))?;
-            spec.bases = bspec.bases.clone();
-            spec.bases.push(bpath);
-            spec.description = bspec.description;
-            spec.scene = bspec.scene;
-            spec.additions = bspec.additions;
-            spec.removals = bspec.removals;
-            spec.overrides = bspec.overrides;
-            spec.camera = bspec.camera;
-            spec.lens = bspec.lens;
-            spec.sensor = bspec.sensor;
-            spec.render = bspec.render;
-            spec.measured = bspec.measured;
-        }
+            None => ResolvedExperiment::empty(&name, &path),
+        };
         for a in &spec.additions {
             add_spans.insert(a.id.clone(), a.span);
         }
@@ -567,6 +482,8 @@ impl P {
                 }
                 "scene" => {
                     self.no_children(file, n)?;
+                    // a scene node replaces the whole scene section, materials included
+                    spec.scene_materials = None;
                     let (w, vs) = self.scene_node(file, n, &mut spec.scene_materials)?;
                     let ext = Path::new(&w)
                         .extension()
@@ -718,7 +635,7 @@ impl P {
                                 return Err(self.unknown_prop(
                                     &k,
                                     ks,
-                                    &["position-m", "look-at-m", "up"],
+                                    &super::language::CAMERA_SCHEMA.names(),
                                     "camera",
                                     &e.value,
                                 ));
@@ -760,14 +677,9 @@ impl P {
                     for e in self.entries(file, n)? {
                         let (k, ks) = self.prop(&e, "render")?;
                         let path = format!("render.{k}");
-                        if !["spp", "max-bounces", "seed", "wavelength-nm"].contains(&k.as_str()) {
-                            return Err(self.unknown_prop(
-                                &k,
-                                ks,
-                                &["spp", "max-bounces", "seed", "wavelength-nm"],
-                                "render",
-                                &e.value,
-                            ));
+                        let known = super::language::RENDER_SCHEMA.names();
+                        if !known.contains(&k.as_str()) {
+                            return Err(self.unknown_prop(&k, ks, &known, "render", &e.value));
                         }
                         if k == "seed"
                             && let KdlValue::Integer(i) = e.raw
@@ -823,6 +735,33 @@ impl P {
         };
         self.stack.pop();
         Ok((kind, spec, sweep))
+    }
+
+    /// Resolve a `base "file"` reference, refusing include cycles and deep nesting.
+    fn base_path(&self, written: &str, vspan: Span, dir: &Path) -> Result<PathBuf, Located> {
+        let Some(bpath) = apply::resolve_ref(written, dir, self.loader) else {
+            return Err(self
+                .e(vspan, format!("base file '{written}' not found"))
+                .with_help("relative paths are looked up in the directory of this file, then in each parent directory"));
+        };
+        let key = key_of(&bpath);
+        if let Some(i) = self.stack.iter().position(|k| *k == key) {
+            let chain: Vec<String> = self.stack[i..]
+                .iter()
+                .chain([&key])
+                .map(|p| p.display().to_string())
+                .collect();
+            return Err(self
+                .e(vspan, format!("include cycle: {}", chain.join(" → ")))
+                .with_help("a setup must not include itself, directly or indirectly"));
+        }
+        if self.stack.len() >= MAX_BASE_DEPTH {
+            return Err(self.e(
+                vspan,
+                format!("bases nested more than {MAX_BASE_DEPTH} deep"),
+            ));
+        }
+        Ok(bpath)
     }
 
     fn prop(&self, e: &Ent, node: &str) -> Result<(String, Span), Located> {
@@ -1213,7 +1152,7 @@ impl P {
         n: &KdlNode,
         dir: &Path,
     ) -> Result<MeasuredInput, Located> {
-        const KNOWN: &[&str] = &["file", "pixel-um", "labels", "names"];
+        let known = super::language::MEASURED_SCHEMA.names();
         let sp = self.node_span(file, n);
         let mut name: Option<(String, Span)> = None;
         let (mut img, mut labels, mut names, mut pixel_um) = (None, None, None, None);
@@ -1277,7 +1216,7 @@ impl P {
                     pixel_um =
                         Some(apply::as_positive(&e.value, k).map_err(|x| self.ae(e.vspan, x))?);
                 }
-                _ => return Err(self.unknown_prop(k, *ks, KNOWN, "measured", &e.value)),
+                _ => return Err(self.unknown_prop(k, *ks, &known, "measured", &e.value)),
             }
         }
         let Some((name, nspan)) = name else {

@@ -53,29 +53,7 @@ pub struct FileRef {
     pub span: Span,
 }
 
-/// Kinds of object an experiment can add to a scene.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Target {
-    /// Macbeth ColorChecker chart (24 patches; labels per patch).
-    Mcc,
-    /// ISO 12233 slanted-edge target.
-    SlantedEdge,
-    /// A mesh file (`file="scenes/bunny.obj"`).
-    Mesh,
-}
-
-impl Target {
-    pub const NAMES: &'static [&'static str] = &["mcc", "slanted-edge", "mesh"];
-    pub fn parse(s: &str) -> Option<Self> {
-        match s {
-            "mcc" => Some(Self::Mcc),
-            "slanted-edge" => Some(Self::SlantedEdge),
-            "mesh" => Some(Self::Mesh),
-            _ => None,
-        }
-    }
-}
+pub use crate::scene::edits::Target;
 
 /// An object added to the scene (`add "edge-near" target="slanted-edge" …`).
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -122,7 +100,7 @@ pub struct CameraSection {
 
 /// A lens or sensor: an optional definition file plus inline overrides.
 /// The names inside `overrides` belong to the optics / sensor modules, which
-/// validate them through a [`super::hooks`] validator.
+/// read them (see [`super::check`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Default)]
 pub struct ConfigSection {
     pub file: Option<FileRef>,
@@ -237,12 +215,35 @@ pub struct ResolvedExperiment {
 }
 
 impl ResolvedExperiment {
+    /// An experiment called `name` defined in `file`, with nothing in it yet.
+    pub fn empty(name: &str, file: &std::path::Path) -> Self {
+        Self {
+            name: name.to_string(),
+            file: file.to_path_buf(),
+            description: None,
+            bases: Vec::new(),
+            scene: None,
+            scene_materials: None,
+            additions: Vec::new(),
+            removals: Vec::new(),
+            overrides: Vec::new(),
+            camera: None,
+            lens: None,
+            sensor: None,
+            render: RenderSettings::default(),
+            measures: Vec::new(),
+            measured: Vec::new(),
+            tags: BTreeMap::new(),
+        }
+    }
+
     /// The captured image called `name`.
     pub fn measured_input(&self, name: &str) -> Option<&MeasuredInput> {
         self.measured.iter().find(|c| c.name == name)
     }
 
-    /// Files whose contents are inputs of a variant (hashed for resume).
+    /// Files whose contents are inputs of a variant (hashed for resume), besides
+    /// the resolved spec itself.
     pub fn referenced_files(&self) -> Vec<PathBuf> {
         let mut v = Vec::new();
         if let Some(s) = &self.scene {
@@ -258,7 +259,9 @@ impl ResolvedExperiment {
                 v.push(f.path.clone());
             }
         }
-        v.extend(self.bases.iter().cloned());
+        // Bases are not hashed as files: everything they set is in the resolved
+        // spec, so an experiment written with a base and the same experiment
+        // written out inline have the same inputs (and the same hash).
         for c in &self.measured {
             v.push(c.file.path.clone());
             v.extend(

@@ -4,7 +4,7 @@
 //! variant that needs them fails with "not supported yet: …" and no number is
 //! ever invented. The lead replaces the bodies as the modules land.
 
-use super::spec::{Addition, Measure, Override, ResolvedExperiment, Target};
+use super::spec::{Addition, Measure, ResolvedExperiment};
 use crate::figure::Figure;
 use crate::image::SensorImage;
 use crate::measure::Measured;
@@ -12,13 +12,12 @@ use crate::measure::plane::Plane;
 use crate::measure::sfr::{SfrChannel, SfrOptions};
 use crate::optical_image::{OpticalImage, Rect};
 use crate::optics::Camera;
-use crate::params::Value;
+use crate::params::ParamError;
 use crate::render::RenderSettings;
-use crate::scene::{
-    CameraModel, CameraPose, CameraSpec, FilmSpec, Material, Scene, look_at_to_world, targets,
-};
+use crate::scene::edits::{self, Placement, TargetSpec, object_matches};
+use crate::scene::{CameraModel, CameraPose, CameraSpec, FilmSpec, Scene, look_at_to_world};
 use crate::sensor::SensorConfig;
-use crate::spectrum::{Spectrum, WavelengthGrid, library};
+use crate::spectrum::WavelengthGrid;
 use crate::{Error, Result};
 use glam::DVec3;
 use std::collections::BTreeMap;
@@ -69,15 +68,18 @@ pub fn build_scene(spec: &ResolvedExperiment) -> Result<Scene> {
     if spec.scene_materials.as_deref() == Some("paper") {
         crate::scene::pbrt::paper::apply_paper_spectra(&mut scene)?;
     }
+    let dir = spec.file.parent().unwrap_or(Path::new("."));
     for name in &spec.removals {
-        remove_object(&mut scene, name)?;
+        edits::remove_object(&mut scene, name)?;
     }
     for o in &spec.overrides {
-        apply_override(&mut scene, o, spec)?;
+        let os = edits::override_spec(&o.params, dir)
+            .map_err(|e| Error::invalid(format!("override '{}': {e}", o.object)))?;
+        edits::apply_override(&mut scene, &o.object, &os)?;
     }
-    let dir = spec.file.parent().unwrap_or(Path::new("."));
     for a in &spec.additions {
-        add_object(&mut scene, a, dir)?;
+        let t = target_spec(a, dir).map_err(|e| Error::invalid(format!("add '{}': {e}", a.id)))?;
+        edits::add_target(&mut scene, &t)?;
     }
     if let Some(c) = &spec.camera {
         let pose = CameraPose {
@@ -105,174 +107,20 @@ pub fn build_scene(spec: &ResolvedExperiment) -> Result<Scene> {
     Ok(scene)
 }
 
-fn object_matches(name: &str, wanted: &str) -> bool {
-    name == wanted
-        || name
-            .strip_prefix(wanted)
-            .is_some_and(|r| r.starts_with('/'))
+/// The placement of an added object, as the scene edits take it.
+fn placement(a: &Addition) -> Placement<'_> {
+    Placement {
+        id: &a.id,
+        position_m: a.position_m,
+        rotate_deg: a.rotate_deg,
+        scale: a.scale,
+        file: a.file.as_ref().map(|f| f.path.as_path()),
+    }
 }
 
-fn ids_matching(scene: &Scene, wanted: &str) -> Result<Vec<u32>> {
-    let ids: Vec<u32> = scene
-        .objects
-        .iter()
-        .enumerate()
-        .filter(|(_, o)| object_matches(&o.name, wanted))
-        .map(|(i, _)| i as u32)
-        .collect();
-    if ids.is_empty() {
-        let names: Vec<&str> = scene.objects.iter().map(|o| o.name.as_str()).collect();
-        let hint = crate::diag::did_you_mean(wanted, names.iter().copied())
-            .map(|s| format!(" (did you mean '{s}'?)"))
-            .unwrap_or_default();
-        return Err(Error::invalid(format!(
-            "no object '{wanted}' in the scene{hint}; objects are: {}",
-            names.join(", ")
-        )));
-    }
-    Ok(ids)
-}
-
-/// Remove every shape whose object is `name` or below it (`name/…`).
-fn remove_object(scene: &mut Scene, name: &str) -> Result<()> {
-    let ids = ids_matching(scene, name)?;
-    scene.meshes.retain(|m| !ids.contains(&m.object));
-    scene.spheres.retain(|m| !ids.contains(&m.object));
-    scene.disks.retain(|m| !ids.contains(&m.object));
-    Ok(())
-}
-
-/// `override "<object>" reflectance="<spectrum>" radiance="<spectrum>" radiance-scale=k`.
-fn apply_override(scene: &mut Scene, o: &Override, spec: &ResolvedExperiment) -> Result<()> {
-    let ids = ids_matching(scene, &o.object)?;
-    let dir = spec.file.parent().unwrap_or(Path::new("."));
-    let unknown = o
-        .params
-        .unknown(&["reflectance", "radiance", "radiance-scale"]);
-    if let Some(u) = unknown.first() {
-        return Err(Error::invalid(format!(
-            "override '{}': unknown property '{u}'; expected reflectance, radiance or radiance-scale",
-            o.object
-        )));
-    }
-    let spectrum = |k: &str| -> Result<Option<Spectrum>> {
-        match o.params.str(k).map_err(Error::invalid)? {
-            Some(r) => Ok(Some(library::resolve(r, dir).map_err(Error::invalid)?)),
-            None => Ok(None),
-        }
-    };
-    let refl = spectrum("reflectance")?;
-    let rad = spectrum("radiance")?;
-    let scale = o.params.f64("radiance-scale").map_err(Error::invalid)?;
-    let mut touched_materials = vec![];
-    for m in &mut scene.meshes {
-        if !ids.contains(&m.object) {
-            continue;
-        }
-        touched_materials.push(m.material);
-        if let Some(e) = &mut m.emission {
-            if let Some(r) = &rad {
-                e.radiance = r.clone();
-            }
-            if let Some(k) = scale {
-                e.radiance = e.radiance.clone().scaled(k);
-            }
-        }
-    }
-    if let Some(r) = refl {
-        for id in touched_materials {
-            if let Some(nm) = scene.materials.get_mut(id as usize) {
-                nm.material = match &nm.material {
-                    Material::DiffuseSpecular {
-                        diffuse,
-                        specular,
-                        roughness,
-                    } => {
-                        // keep the specular-to-diffuse ratio of the original
-                        let k = specular.values.iter().cloned().fold(0.0, f64::max)
-                            / diffuse.values.iter().cloned().fold(1e-12, f64::max);
-                        let _ = diffuse;
-                        Material::DiffuseSpecular {
-                            diffuse: r.clone(),
-                            specular: r.clone().scaled(k.min(1.0)),
-                            roughness: *roughness,
-                        }
-                    }
-                    _ => Material::Diffuse {
-                        reflectance: r.clone(),
-                    },
-                };
-            }
-        }
-    }
-    Ok(())
-}
-
-fn add_object(scene: &mut Scene, a: &Addition, dir: &Path) -> Result<()> {
-    let pos = DVec3::from_array(a.position_m);
-    let rot = DVec3::from_array(a.rotate_deg);
-    match a.target {
-        Target::Mcc => {
-            let known = ["patch-size-m", "patch-pitch-m"];
-            if let Some(u) = a.params.unknown(&known).first() {
-                return Err(Error::invalid(format!(
-                    "add '{}': unknown property '{u}' for target=\"mcc\"",
-                    a.id
-                )));
-            }
-            let mut c = targets::MccChart {
-                name: a.id.clone(),
-                position_m: pos,
-                rotation_deg: rot,
-                ..Default::default()
-            };
-            let k = a.scale[0];
-            c.width_m *= k;
-            c.height_m *= k;
-            c.patch_size_m *= k;
-            c.patch_pitch_m *= k;
-            if let Some(v) = a.params.f64("patch-size-m").map_err(Error::invalid)? {
-                c.patch_size_m = v;
-            }
-            if let Some(v) = a.params.f64("patch-pitch-m").map_err(Error::invalid)? {
-                c.patch_pitch_m = v;
-            }
-            targets::add_mcc(scene, &c)
-        }
-        Target::SlantedEdge => {
-            if let Some(u) = a.params.unknown(&["tilt-deg", "reflectance"]).first() {
-                return Err(Error::invalid(format!(
-                    "add '{}': unknown property '{u}' for target=\"slanted-edge\"",
-                    a.id
-                )));
-            }
-            let mut e = targets::SlantedEdge::new(&a.id, pos)?;
-            e.rotation_deg = rot;
-            e.width_m *= a.scale[0];
-            e.height_m *= a.scale[1];
-            if let Some(t) = a.params.f64("tilt-deg").map_err(Error::invalid)? {
-                e.tilt_deg = t;
-            }
-            if let Some(r) = a.params.str("reflectance").map_err(Error::invalid)? {
-                e.white = library::resolve(r, dir).map_err(Error::invalid)?;
-            }
-            targets::add_slanted_edge(scene, &e)
-        }
-        Target::Mesh => {
-            let f = a.file.as_ref().ok_or_else(|| {
-                Error::invalid(format!("add '{}': target=\"mesh\" needs file=\"…\"", a.id))
-            })?;
-            let mut m = targets::PlacedMesh::bunny(&f.path)?;
-            m.name = a.id.clone();
-            m.position_m = pos;
-            m.scale = a.scale[0];
-            m.rot_y_deg = a.rotate_deg[1];
-            if let Some(r) = a.params.str("reflectance").map_err(Error::invalid)? {
-                m.reflectance = library::resolve(r, dir).map_err(Error::invalid)?;
-            }
-            targets::add_mesh(scene, &m)
-        }
-    }
+/// The target an `add` node describes (read by check and by run).
+pub fn target_spec(a: &Addition, dir: &Path) -> std::result::Result<TargetSpec, ParamError> {
+    crate::scene::edits::target_spec(a.target, &placement(a), &a.params, dir)
 }
 
 /// The sensor of a variant: its file (or the generic sensor) with inline overrides.
@@ -306,201 +154,35 @@ pub fn film_spec(spec: &ResolvedExperiment, scene: &Scene) -> Result<FilmSpec> {
     Ok(scene.film.clone().unwrap_or_default())
 }
 
-/// Properties of a `lens` node with a file.
-const LENS_FILE_KEYS: &[&str] = &[
-    "film-distance-mm",
-    "focus-distance-m",
-    "rtf-degree",
-    "rtf-axis-weight",
-];
-/// Properties of an inline `lens model=…` node.
-const LENS_MODEL_KEYS: &[&str] = &[
-    "model",
-    "fov-deg",
-    "f-number",
-    "focal-length-mm",
-    "focus-distance-m",
-];
-
-/// `rtf-degree`: N fits an RTF of degree N to the prescription and renders
-/// through it; absent or "none" traces the file as it is (so a sweep can
-/// compare both).
-fn rtf_degree(p: &crate::params::Params) -> std::result::Result<Option<usize>, String> {
-    match p.get("rtf-degree") {
-        None => Ok(None),
-        Some(Value::String(s)) if s == "none" => Ok(None),
-        Some(Value::Number(d)) if d.fract() == 0.0 && (1.0..=16.0).contains(d) => {
-            Ok(Some(*d as usize))
-        }
-        Some(v) => Err(format!(
-            "rtf-degree = {v}; expected a whole number 1…16 or \"none\""
-        )),
+/// The camera model of a variant: its `lens` node (through the one function
+/// that reads lens properties) or, without one, the scene's own camera.
+pub fn camera_model(spec: &ResolvedExperiment, scene: &Scene) -> Result<CameraModel> {
+    if let Some(l) = &spec.lens {
+        let file = l.file.as_ref().map(|f| f.path.as_path());
+        return crate::scene::camera_params::camera_model(file, &l.overrides).map_err(|e| {
+            Error::invalid(match &l.file {
+                Some(f) => format!("lens '{}': {e}", f.written),
+                None => format!("lens: {e}"),
+            })
+        });
     }
+    scene
+        .camera
+        .as_ref()
+        .map(|c| c.model.clone())
+        .ok_or_else(|| {
+            Error::invalid(format!(
+                "experiment '{}' has no camera and no lens",
+                spec.name
+            ))
+        })
 }
 
-/// Check-time validator of an experiment's `lens` section (built into
-/// `hooks::validator`): the same names and values `build_camera` accepts,
-/// reported at the property's `file:line:col`.
-pub fn validate_lens(
-    file: Option<&Path>,
-    p: &crate::params::Params,
-) -> std::result::Result<(), super::hooks::ParamError> {
-    use super::hooks::ParamError;
-    let positive = |k: &str| -> std::result::Result<(), ParamError> {
-        match p.f64(k) {
-            Ok(Some(x)) if !(x > 0.0 && x.is_finite()) => Err(ParamError::new(
-                Some(k),
-                format!("'{k}' must be a positive number, found {x}"),
-            )
-            .at_value()),
-            Err(e) => Err(ParamError::new(Some(k), e).at_value()),
-            _ => Ok(()),
-        }
-    };
-    let Some(file) = file else {
-        if let Some(u) = p.unknown(LENS_MODEL_KEYS).first() {
-            return Err(ParamError::unknown(u, LENS_MODEL_KEYS));
-        }
-        for k in ["fov-deg", "f-number", "focal-length-mm", "focus-distance-m"] {
-            positive(k)?;
-        }
-        return match p.str("model") {
-            Ok(None | Some("pinhole")) if p.get("fov-deg").is_none() => Err(ParamError::new(
-                None,
-                "lens model=\"pinhole\" needs fov-deg",
-            )),
-            Ok(Some("thin-lens")) if p.get("focal-length-mm").is_none() => Err(ParamError::new(
-                None,
-                "lens model=\"thin-lens\" needs focal-length-mm",
-            )),
-            Ok(None | Some("pinhole" | "thin-lens")) => Ok(()),
-            Ok(Some(other)) => Err(ParamError::new(
-                Some("model"),
-                format!(
-                    "lens model '{other}': expected \"pinhole\" or \"thin-lens\", or a lens file"
-                ),
-            )
-            .at_value()),
-            Err(e) => Err(ParamError::new(Some("model"), e).at_value()),
-        };
-    };
-    if let Some(u) = p.unknown(LENS_FILE_KEYS).first() {
-        return Err(ParamError::unknown(u, LENS_FILE_KEYS));
-    }
-    for k in ["film-distance-mm", "focus-distance-m", "rtf-axis-weight"] {
-        positive(k)?;
-    }
-    let degree = rtf_degree(p).map_err(|e| ParamError::new(Some("rtf-degree"), e).at_value())?;
-    match degree {
-        None if p.get("rtf-axis-weight").is_some() => Err(ParamError::new(
-            Some("rtf-axis-weight"),
-            "rtf-axis-weight needs rtf-degree",
-        )),
-        Some(_) => match crate::optics::analysis::load_lens(file) {
-            Ok(crate::optics::analysis::LensFile::Rtf(_)) => Err(ParamError::new(
-                Some("rtf-degree"),
-                "rtf-degree needs a lens prescription to fit, and this file is an RTF",
-            )),
-            Ok(_) => Ok(()),
-            Err(e) => Err(ParamError::new(None, e.to_string())),
-        },
-        None => Ok(()),
-    }
-}
-
-/// Build the camera (lens model + pose) of a variant: a lens file (prescription
-/// or RTF) with `film-distance-mm` / `focus-distance-m`, an inline
-/// `lens model="pinhole" fov-deg=… f-number=…` or
-/// `lens model="thin-lens" focal-length-mm=… f-number=… focus-distance-m=…`,
-/// or the scene's own camera.
+/// Build the camera (lens model) of a variant on its film, through the one
+/// camera factory (`optics::camera::build`).
 pub fn build_camera(spec: &ResolvedExperiment, scene: &Scene) -> Result<Box<dyn Camera>> {
     let film = film_spec(spec, scene)?;
-    if let Some(l) = &spec.lens {
-        let p = &l.overrides;
-        let fd_mm = p.f64("film-distance-mm").map_err(Error::invalid)?;
-        let focus_m = p.f64("focus-distance-m").map_err(Error::invalid)?;
-        if let Some(f) = &l.file {
-            // The check-time validator is the one list of names and values
-            // (variants built without `parse`/`plan` get the same checks).
-            validate_lens(Some(&f.path), p)
-                .map_err(|e| Error::invalid(format!("lens '{}': {}", f.written, e.message)))?;
-            if let Some(d) = rtf_degree(p).map_err(Error::invalid)? {
-                let axis_weight = p.f64("rtf-axis-weight").map_err(Error::invalid)?;
-                return crate::optics::analysis::fitted_rtf_camera(
-                    &f.path,
-                    fd_mm.map(|d| d * 1e-3),
-                    focus_m,
-                    d,
-                    axis_weight.unwrap_or(1.0),
-                );
-            }
-            return crate::optics::analysis::load_lens_camera(
-                &f.path,
-                fd_mm.map(|d| d * 1e-3),
-                focus_m,
-                None,
-            );
-        }
-        let model = p.str("model").map_err(Error::invalid)?.unwrap_or("pinhole");
-        let fnum = p.f64("f-number").map_err(Error::invalid)?.unwrap_or(2.0);
-        return match model {
-            "pinhole" => {
-                let fov = p
-                    .f64("fov-deg")
-                    .map_err(Error::invalid)?
-                    .ok_or_else(|| Error::invalid("lens model=\"pinhole\" needs fov-deg"))?;
-                Ok(Box::new(crate::optics::pinhole::Pinhole::new(
-                    fov, fnum, &film,
-                )?))
-            }
-            "thin-lens" => {
-                let f_mm = p
-                    .f64("focal-length-mm")
-                    .map_err(Error::invalid)?
-                    .ok_or_else(|| {
-                        Error::invalid("lens model=\"thin-lens\" needs focal-length-mm")
-                    })?;
-                let focus = focus_m.unwrap_or(f64::INFINITY);
-                Ok(Box::new(crate::optics::thin_lens::ThinLens::new(
-                    f_mm * 1e-3,
-                    fnum,
-                    focus,
-                )?))
-            }
-            other => Err(Error::invalid(format!(
-                "lens model '{other}': expected \"pinhole\" or \"thin-lens\", or a lens file"
-            ))),
-        };
-    }
-    let cam = scene.camera.as_ref().ok_or_else(|| {
-        Error::invalid(format!(
-            "experiment '{}' has no camera and no lens",
-            spec.name
-        ))
-    })?;
-    match &cam.model {
-        CameraModel::Pinhole { .. } => crate::optics::pinhole::camera_from_spec(cam, &film),
-        CameraModel::ThinLens {
-            focal_length_m,
-            f_number,
-            focus_distance_m,
-        } => Ok(Box::new(crate::optics::thin_lens::ThinLens::new(
-            *focal_length_m,
-            *f_number,
-            *focus_distance_m,
-        )?)),
-        CameraModel::LensFile {
-            path,
-            film_distance_m,
-            focus_distance_m,
-            aperture_diameter_m,
-        } => crate::optics::analysis::load_lens_camera(
-            path,
-            *film_distance_m,
-            *focus_distance_m,
-            *aperture_diameter_m,
-        ),
-    }
+    crate::optics::camera::build(&camera_model(spec, scene)?, &film)
 }
 
 /// Object names whose pixels the measurements read, and whether only the
@@ -604,6 +286,18 @@ pub struct Rendered {
     pub object_rects: BTreeMap<String, Rect>,
 }
 
+/// The renderer's settings of a variant (its `render` node), whole frame.
+pub fn render_settings(spec: &ResolvedExperiment) -> Result<RenderSettings> {
+    Ok(RenderSettings {
+        spp: u32::try_from(spec.render.spp)
+            .map_err(|_| Error::invalid("render spp is too large"))?,
+        max_bounces: spec.render.max_bounces,
+        grid: spec.render.wavelength.clone(),
+        seed: spec.render.seed,
+        ..Default::default()
+    })
+}
+
 /// Render the optical image (only the regions the measurements read).
 pub fn render(spec: &ResolvedExperiment, scene: &Scene, camera: &dyn Camera) -> Result<Rendered> {
     let film = film_spec(spec, scene)?;
@@ -615,13 +309,8 @@ pub fn render(spec: &ResolvedExperiment, scene: &Scene, camera: &dyn Camera) -> 
         _ => (None, BTreeMap::new()),
     };
     let settings = RenderSettings {
-        spp: u32::try_from(spec.render.spp)
-            .map_err(|_| Error::invalid("render spp is too large"))?,
-        max_bounces: spec.render.max_bounces,
-        grid: spec.render.wavelength.clone(),
-        seed: spec.render.seed,
         roi,
-        ..Default::default()
+        ..render_settings(spec)?
     };
     let oi = crate::render::render(scene, camera, &film, &settings)?;
     Ok(Rendered { oi, object_rects })

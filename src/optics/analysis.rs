@@ -171,34 +171,6 @@ pub fn prescription_film_distance_mm(
     }
 }
 
-/// Load a lens file and build its camera for the renderer
-/// (scene `CameraModel::LensFile`): distances in metres; the focus distance
-/// is measured from the film (camera origin). Stopping a lens file down
-/// (`aperture_diameter_m`) is not supported.
-pub fn load_lens_camera(
-    path: &Path,
-    film_distance_m: Option<f64>,
-    focus_distance_m: Option<f64>,
-    aperture_diameter_m: Option<f64>,
-) -> Result<Box<dyn Camera>> {
-    if aperture_diameter_m.is_some() {
-        return Err(Error::NotSupported(format!(
-            "{}: changing the aperture of a lens file",
-            path.display()
-        )));
-    }
-    let cam = lens_camera(
-        load_lens(path)?,
-        film_distance_m.map(|d| d * 1e3),
-        focus_distance_m,
-        DEFAULT_WAVELENGTH_NM,
-    )?;
-    Ok(match cam {
-        LensCamera::Prescription(c) => Box::new(c),
-        LensCamera::Rtf(c) => Box::new(c),
-    })
-}
-
 /// A lens prescription rendered through an RTF fitted to it on the fly
 /// (KDL `lens "file" rtf-degree=N`): the film distance is the
 /// prescription's (given, or solved for `focus_distance_m` at 550 nm, or

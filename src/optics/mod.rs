@@ -41,9 +41,16 @@ pub trait Camera: Send + Sync {
     }
     /// Human-readable description for sidecars and reports.
     fn describe(&self) -> String;
+    /// Distance from the film to the optics it sits behind (pinhole, thin lens,
+    /// rear vertex of a prescription, RTF input plane's reference), metres;
+    /// None for test cameras that do not say.
+    fn film_distance_m(&self) -> Option<f64> {
+        None
+    }
 }
 
 pub mod analysis;
+pub mod camera;
 pub mod fit;
 pub mod prescription;
 pub mod rtf;

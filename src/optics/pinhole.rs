@@ -12,7 +12,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 use super::{Camera, CameraRay};
-use crate::scene::{CameraModel, CameraSpec, FilmSpec};
+use crate::scene::FilmSpec;
 use crate::{Error, Result};
 use glam::{DVec2, DVec3};
 
@@ -65,27 +65,14 @@ impl Camera for Pinhole {
             weight,
         })
     }
+    fn film_distance_m(&self) -> Option<f64> {
+        Some(self.film_distance_m)
+    }
     fn describe(&self) -> String {
         format!(
             "pinhole fov {}° f/{} (film distance {:.6} m)",
             self.fov_deg, self.f_number, self.film_distance_m
         )
-    }
-}
-
-/// Build the scene's camera. Only the pinhole is built here; other models
-/// return `Error::NotSupported` (wired by the optics code).
-pub fn camera_from_spec(spec: &CameraSpec, film: &FilmSpec) -> Result<Box<dyn Camera>> {
-    match &spec.model {
-        CameraModel::Pinhole { fov_deg, f_number } => {
-            Ok(Box::new(Pinhole::new(*fov_deg, *f_number, film)?))
-        }
-        CameraModel::ThinLens { .. } => Err(Error::NotSupported(
-            "thin-lens camera in render::camera_from_spec".into(),
-        )),
-        CameraModel::LensFile { .. } => Err(Error::NotSupported(
-            "lens-file camera in render::camera_from_spec".into(),
-        )),
     }
 }
 

@@ -810,6 +810,9 @@ impl Camera for PrescriptionCamera {
     fn is_dispersive(&self) -> bool {
         self.lens.is_dispersive()
     }
+    fn film_distance_m(&self) -> Option<f64> {
+        Some(self.film_distance_mm * 1e-3)
+    }
     fn describe(&self) -> String {
         format!(
             "lens prescription '{}', film distance {} mm",

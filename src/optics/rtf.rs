@@ -736,6 +736,9 @@ impl Camera for RtfCamera {
                 .iter()
                 .any(|w| w.outputs != self.rtf.waves[0].outputs || w.pass != self.rtf.waves[0].pass)
     }
+    fn film_distance_m(&self) -> Option<f64> {
+        Some(self.film_distance_mm * 1e-3)
+    }
     fn describe(&self) -> String {
         format!(
             "ray-transfer function '{}', film distance {} mm",

@@ -119,6 +119,9 @@ impl Camera for ThinLens {
         })
     }
 
+    fn film_distance_m(&self) -> Option<f64> {
+        Some(ThinLens::film_distance_m(self))
+    }
     fn describe(&self) -> String {
         format!(
             "thin lens f={} mm, f/{}, focus {} m",

@@ -173,6 +173,9 @@ impl Camera for RadiancePinhole {
             .sample_ray(film_m, u, lambda_nm)
             .map(|r| CameraRay { weight: 1.0, ..r })
     }
+    fn film_distance_m(&self) -> Option<f64> {
+        Some(self.0.film_distance_m)
+    }
     fn describe(&self) -> String {
         format!("radiance {}", self.0.describe())
     }

@@ -7,6 +7,9 @@
 //!     look-at-m 0 0.105 0.6
 //!     up 0 1 0
 //! }
+//! // or a lens, with the properties of an experiment's `lens` node (`camsim params`):
+//! //   camera model="thin-lens" focal-length-mm=4.38 f-number=1.73 focus-distance-m=0.5 { … }
+//! //   camera lens="../lenses/rtf/pixel4a-rearcamera-ellipse-raytransfer.json" film-distance-mm=0.4651 { … }
 //! render spp=64 max-bounces=6
 //! material "white" diffuse="cbox-white-wall"
 //! material "red" diffuse="cbox-red-wall" specular="cbox-red-wall" specular-scale=0.1 roughness=0.46
@@ -87,6 +90,66 @@ impl Ctx<'_> {
             .find(|e| e.name().map(|n| n.value()) == Some(key))
             .map(|e| (e.value(), e.span()))
     }
+    /// `camera [lens="FILE"] <lens properties>`: the same properties as an
+    /// experiment's `lens` node, read by the same function
+    /// (`camera_params::camera_model`); errors point at the property.
+    fn camera_model(&self, node: &KdlNode) -> Result<CameraModel> {
+        use crate::params::{Params, Value};
+        let mut params = Params::new();
+        let mut file = None;
+        for e in node.entries() {
+            let Some(n) = e.name() else {
+                return Err(self.err_at(
+                    e.span(),
+                    "unexpected argument on 'camera'; expected name=value properties",
+                ));
+            };
+            let v = match e.value() {
+                KdlValue::Integer(i) => Value::Number(*i as f64),
+                KdlValue::Float(x) if x.is_finite() => Value::Number(*x),
+                KdlValue::String(t) => Value::String(t.clone()),
+                KdlValue::Bool(b) => Value::Bool(*b),
+                _ => {
+                    return Err(self.err_at(
+                        e.span(),
+                        format!(
+                            "'{}': expected a finite number, string or boolean",
+                            n.value()
+                        ),
+                    ));
+                }
+            };
+            if n.value() == "lens" {
+                let Value::String(f) = v else {
+                    return Err(self.err_at(e.span(), "'lens': expected a file name"));
+                };
+                let path = self.base.join(&f);
+                if !path.is_file() {
+                    return Err(self.err_at(e.span(), format!("lens file '{f}' not found")));
+                }
+                file = Some(path);
+                continue;
+            }
+            params.set(n.value(), v);
+        }
+        super::camera_params::camera_model(file.as_deref(), &params).map_err(|pe| {
+            let span = pe
+                .name
+                .as_deref()
+                .and_then(|k| self.prop(node, k))
+                .map(|(_, sp)| sp)
+                .unwrap_or(node.span());
+            let l = Located::at_offset(
+                self.file,
+                self.src,
+                span.offset(),
+                span.len(),
+                format!("camera: {}", pe.message),
+            );
+            l.with_help_opt(pe.help).into()
+        })
+    }
+
     fn check_props(&self, node: &KdlNode, allowed: &[&str]) -> Result<()> {
         for e in node.entries() {
             let Some(n) = e.name() else { continue };
@@ -662,16 +725,8 @@ pub fn parse_kdl_scene(src: &str, path: &Path) -> Result<SceneFile> {
         }
     }
     if let Some(node) = camera_node {
-        cx.check_props(node, &["model", "fov-deg", "f-number"])?;
         cx.check_children(node, &["position-m", "look-at-m", "up"])?;
-        let model = cx.string(node, "model")?.unwrap_or("pinhole");
-        if model != "pinhole" {
-            return Err(cx.err(node, format!("camera model '{model}' is not supported in scene files yet (pinhole only; lenses come from experiments)")));
-        }
-        let fov = cx
-            .positive(node, "fov-deg")?
-            .ok_or_else(|| cx.err(node, "pinhole camera needs fov-deg"))?;
-        let n = cx.positive(node, "f-number")?.unwrap_or(2.0);
+        let model = cx.camera_model(node)?;
         let pose = CameraPose {
             position: cx
                 .child_v3(node, "position-m")?
@@ -685,13 +740,7 @@ pub fn parse_kdl_scene(src: &str, path: &Path) -> Result<SceneFile> {
                 "degenerate camera pose (look-at equals position, or up parallel to the view)",
             )
         })?;
-        scene.camera = Some(CameraSpec {
-            to_world,
-            model: CameraModel::Pinhole {
-                fov_deg: fov,
-                f_number: n,
-            },
-        });
+        scene.camera = Some(CameraSpec { to_world, model });
     }
     Ok(SceneFile {
         scene,

@@ -1,5 +1,7 @@
 //! Scenes: the model, loaders (meshes, pbrt), and measurement targets.
 
+pub mod camera_params;
+pub mod edits;
 pub mod kdl_scene;
 pub mod mesh_io;
 pub mod model;

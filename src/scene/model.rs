@@ -173,7 +173,18 @@ pub enum CameraModel {
         film_distance_m: Option<f64>,
         focus_distance_m: Option<f64>,
         aperture_diameter_m: Option<f64>,
+        /// Render a prescription through an RTF fitted to it on the fly.
+        rtf_fit: Option<RtfFitRequest>,
     },
+}
+
+/// KDL `lens "PRESCRIPTION" rtf-degree=N [rtf-axis-weight=W]`: fit an RTF of
+/// this degree to the prescription and render through it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RtfFitRequest {
+    pub degree: usize,
+    /// Extra weight of the on-axis film bundles in the fit (1 = whole field).
+    pub axis_weight: f64,
 }
 
 /// The scene's own camera (pbrt `Camera`, or KDL `camera`).

@@ -1173,14 +1173,14 @@ pub fn read_ri_csv(p: &Path) -> Result<(Vec<f64>, Vec<f64>), String> {
 }
 
 /// Check-time validator of an experiment's `sensor` section (built into
-/// `experiment::hooks::validator`): the file (or the generic sensor)
+/// `experiment::check`): the file (or the generic sensor)
 /// with each inline override applied in turn, so an unknown or out-of-range
 /// property is reported at its own `file:line:col` before anything runs.
 pub fn validate_overrides(
     file: Option<&Path>,
     p: &Params,
-) -> std::result::Result<(), crate::experiment::hooks::ParamError> {
-    use crate::experiment::hooks::ParamError;
+) -> std::result::Result<(), crate::params::ParamError> {
+    use crate::params::ParamError;
     let mut cfg = match file {
         Some(f) => SensorConfig::load(f).map_err(|e| ParamError::new(None, e.to_string()))?,
         None => SensorConfig::generic(),

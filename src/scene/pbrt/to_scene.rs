@@ -204,6 +204,7 @@ pub fn camera(
             film_distance_m: None,
             focus_distance_m: Some(*focus_distance_m),
             aperture_diameter_m: Some(aperture_diameter_mm * 1e-3),
+            rtf_fit: None,
         },
     };
     Ok(CameraSpec { to_world, model })

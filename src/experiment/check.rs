@@ -1,0 +1,99 @@
+//! Check time: every variant's stages are built from their parameters by the
+//! same functions `run` uses (the sensor from its file and properties, the
+//! camera model from the `lens` node, each measurement's options, the scene
+//! edits' parameters), without rendering. A [`ParamError`] is located at the
+//! property it names (its name, or its value), else at the node.
+
+use super::apply::ApplyError;
+use super::source::Span;
+use super::spec::{PropSpans, ResolvedExperiment};
+use crate::params::{ParamError, Params};
+use std::path::Path;
+
+/// Build (without rendering) every stage of `spec` from its parameters.
+pub fn check_stages(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError)> {
+    let located = |e: ParamError, ps: &PropSpans, whole: Span| {
+        let spans = if e.on_value { &ps.values } else { &ps.names };
+        let span = e
+            .name
+            .as_ref()
+            .and_then(|n| spans.get(n))
+            .copied()
+            .unwrap_or(whole);
+        (
+            span,
+            ApplyError {
+                message: e.message,
+                help: e.help,
+                on_path: false,
+            },
+        )
+    };
+    if let Some(s) = &spec.sensor {
+        crate::sensor::config::validate_overrides(
+            s.file.as_ref().map(|f| f.path.as_path()),
+            &s.overrides,
+        )
+        .map_err(|e| located(e, &s.spans, s.span))?;
+    }
+    if let Some(l) = &spec.lens {
+        let model = crate::scene::camera_params::camera_model(
+            l.file.as_ref().map(|f| f.path.as_path()),
+            &l.overrides,
+        )
+        .map_err(|e| located(e, &l.spans, l.span))?;
+        crate::optics::camera::check(&model)
+            .map_err(|e| located(ParamError::section(e.to_string()), &l.spans, l.span))?;
+    }
+    let dir = spec.file.parent().unwrap_or(Path::new(""));
+    for m in &spec.measures {
+        check_measure(&m.kind, &m.params, dir).map_err(|e| located(e, &m.spans, m.span))?;
+    }
+    for a in &spec.additions {
+        super::stages::target_spec(a, dir).map_err(|e| located(e, &a.spans, a.span))?;
+    }
+    for o in &spec.overrides {
+        crate::scene::edits::check_override(&o.params, dir)
+            .map_err(|e| located(e, &o.spans, o.span))?;
+    }
+    Ok(())
+}
+
+/// A measurement's options, built as `run` builds them.
+fn check_measure(kind: &str, params: &Params, _dir: &Path) -> Result<(), ParamError> {
+    match kind {
+        "colorimetry" => validate_colorimetry(params),
+        _ => Ok(()),
+    }
+}
+
+/// `measure "colorimetry" spectrum="cie-d65" [wavelength-nm=(380 780 5)]`.
+fn validate_colorimetry(p: &Params) -> Result<(), ParamError> {
+    const KNOWN: &[&str] = &["spectrum", "wavelength-nm"];
+    if let Some(u) = p.unknown(KNOWN).first() {
+        return Err(ParamError::unknown(u, KNOWN));
+    }
+    match p.get("spectrum") {
+        None => Err(ParamError::new(
+            None,
+            "colorimetry needs spectrum=\"<name>\" (e.g. spectrum=\"cie-d65\")",
+        )),
+        Some(crate::params::Value::String(s)) => {
+            if s.contains('#') {
+                return Ok(()); // a CSV column; read (and checked) when the variant runs
+            }
+            crate::spectrum::library::named(s).map(|_| ()).map_err(|e| {
+                let mut err = ParamError::new(Some("spectrum"), e.clone()).at_value();
+                if let Some(i) = e.find("(did you mean") {
+                    err.help = Some(e[i + 1..e.len() - 1].to_string());
+                    err.message = e[..i].trim().to_string();
+                }
+                err
+            })
+        }
+        Some(v) => Err(ParamError::new(
+            Some("spectrum"),
+            format!("spectrum: expected a string, found {v}"),
+        )),
+    }
+}
