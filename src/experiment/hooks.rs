@@ -1,7 +1,7 @@
 //! Validator hooks: the sensor, lens and measurement modules own the names of
 //! their parameters; the experiment language only enforces the unit rule and
 //! the value types. Each module provides a [`SectionValidator`] (built in:
-//! colorimetry, `sensor` → `sensor::config::validate_overrides`, `lens` →
+//! colorimetry, `sensor` → `sensor::sensor_params::validate_overrides`, `lens` →
 //! `stages::validate_lens`; others through [`register`]), and `camsim check` /
 //! `plan` / `run` call it on the resolved section of every variant, so a
 //! misspelt sensor property is an error with `file:line:col` before anything
@@ -15,49 +15,8 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::RwLock;
 
-/// What a validator reports: the offending property (None = the whole
-/// section), what is wrong and what is expected, and an optional suggestion.
-#[derive(Clone, Debug, PartialEq)]
-pub struct ParamError {
-    pub name: Option<String>,
-    pub message: String,
-    pub help: Option<String>,
-    /// Point at the property's value rather than its name.
-    pub on_value: bool,
-}
-
-impl ParamError {
-    pub fn new(name: Option<&str>, message: impl Into<String>) -> Self {
-        Self {
-            name: name.map(str::to_string),
-            message: message.into(),
-            help: None,
-            on_value: false,
-        }
-    }
-    pub fn with_help(mut self, h: impl Into<String>) -> Self {
-        self.help = Some(h.into());
-        self
-    }
-    /// Report at the property's value (e.g. an unknown spectrum name).
-    pub fn at_value(mut self) -> Self {
-        self.on_value = true;
-        self
-    }
-    /// Unknown name `name` among `known`, with a did-you-mean suggestion.
-    pub fn unknown(name: &str, known: &[&str]) -> Self {
-        let mut e = Self::new(
-            Some(name),
-            format!(
-                "unknown property '{name}'; expected one of: {}",
-                known.join(", ")
-            ),
-        );
-        e.help = crate::diag::did_you_mean(name, known.iter().copied())
-            .map(|s| format!("did you mean '{s}'?"));
-        e
-    }
-}
+/// What a validator reports (the one error type of parameter handling).
+pub use crate::params::ParamError;
 
 /// Validates one section: `file` is the referenced definition file (if any),
 /// `params` the inline overrides / properties. Must not panic.
@@ -85,14 +44,14 @@ pub fn validator(section: &str) -> Option<SectionValidator> {
 fn builtin(section: &str) -> Option<SectionValidator> {
     match section {
         "measure:colorimetry" => Some(validate_colorimetry),
-        "sensor" => Some(crate::sensor::config::validate_overrides),
+        "sensor" => Some(crate::sensor::sensor_params::validate_overrides),
         "lens" => Some(super::stages::validate_lens),
         _ => None,
     }
 }
 
 /// Validators camsim installs beyond the built-in ones (colorimetry, the
-/// sensor section: `sensor::config::validate_overrides`, the lens section:
+/// sensor section: `sensor::sensor_params::validate_overrides`, the lens section:
 /// `stages::validate_lens`). Called by the CLI before parsing; a place for
 /// validators of future modules.
 pub fn install_defaults() {}
