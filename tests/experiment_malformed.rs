@@ -178,7 +178,7 @@ const CASES: &[(&str, &str, &str)] = &[
     (
         "sensor-unknown-property.kdl",
         "sensor-unknown-property.kdl:2:33",
-        "unknown sensor property 'exposur-s' (did you mean 'exposure-s'?)",
+        "unknown property 'exposur-s' on sensor",
     ),
     (
         "sensor-number-without-unit.kdl",
@@ -325,6 +325,7 @@ const HELPS: &[(&str, &str)] = &[
         "did you mean 'object.edge-near.position-m'?",
     ),
     ("sensor-number-without-unit.kdl", "write exposure-s=…"),
+    ("sensor-unknown-property.kdl", "did you mean 'exposure-s'?"),
 ];
 
 fn dir() -> &'static Path {

@@ -30,11 +30,8 @@ pub fn check_stages(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError)>
         )
     };
     if let Some(s) = &spec.sensor {
-        crate::sensor::config::validate_overrides(
-            s.file.as_ref().map(|f| f.path.as_path()),
-            &s.overrides,
-        )
-        .map_err(|e| located(e, &s.spans, s.span))?;
+        crate::sensor::sensor_config(s.file.as_ref().map(|f| f.path.as_path()), &s.overrides)
+            .map_err(|e| located(e, &s.spans, s.span))?;
     }
     if let Some(l) = &spec.lens {
         let model = crate::scene::camera_params::camera_model(

@@ -123,18 +123,15 @@ pub fn target_spec(a: &Addition, dir: &Path) -> std::result::Result<TargetSpec, 
     crate::scene::edits::target_spec(a.target, &placement(a), &a.params, dir)
 }
 
-/// The sensor of a variant: its file (or the generic sensor) with inline overrides.
+/// The sensor of a variant: its file (or the generic sensor) with its `sensor`
+/// node's properties, through the one function that reads them.
 pub fn sensor_config(spec: &ResolvedExperiment) -> Result<Option<SensorConfig>> {
     let Some(s) = &spec.sensor else {
         return Ok(None);
     };
-    let mut cfg = match &s.file {
-        Some(f) => SensorConfig::load(&f.path)?,
-        None => SensorConfig::generic(),
-    };
-    cfg.apply_overrides(&s.overrides)
-        .map_err(|e| Error::invalid(format!("sensor '{}': {e}", cfg.name)))?;
-    Ok(Some(cfg))
+    crate::sensor::sensor_config(s.file.as_ref().map(|f| f.path.as_path()), &s.overrides)
+        .map(Some)
+        .map_err(|e| Error::invalid(format!("sensor: {e}")))
 }
 
 /// The film the optical image is rendered on: the sensor's pixel grid when the

@@ -1,7 +1,11 @@
 //! The image sensor model: spectral irradiance → electrons → volts → digital values,
 //! and the calibration a sensor engineer runs on its output.
 //!
-//! - [`config`]: sensor definition files (`sensors/*.kdl`) → [`SensorConfig`], overrides;
+//! - [`config`]: [`SensorConfig`] and the quantities derived from it;
+//! - [`config_file`]: sensor definition files (`sensors/*.kdl`) → [`SensorConfig`];
+//! - [`sensor_params`]: the properties of a `sensor` ([`SCHEMA`]) and [`sensor_config`]
+//!   (file + an experiment's inline properties → [`SensorConfig`]);
+//! - [`relative_illumination`]: pixel/microlens relative illumination models;
 //! - [`pipeline`]: the model itself ([`simulate`], [`simulate_frame`], [`simulate_flat`]);
 //! - [`rng`]: counter-based per-pixel random streams, exact Poisson sampling;
 //! - [`output`]: raw 16-bit PNG, DNG, demosaiced preview;
@@ -13,12 +17,16 @@
 pub mod bench;
 pub mod calibrate;
 pub mod config;
+pub mod config_file;
 pub mod flatfield;
 pub mod nnls;
 pub mod output;
 pub mod pipeline;
+pub mod relative_illumination;
 pub mod rng;
+pub mod sensor_params;
 
 pub use bench::bench_sensor;
 pub use config::{Exposure, RelativeIllumination, SensorConfig, Sources};
 pub use pipeline::{SensorFrame, simulate, simulate_flat, simulate_frame};
+pub use sensor_params::{SCHEMA, sensor_config};

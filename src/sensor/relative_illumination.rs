@@ -1,0 +1,323 @@
+//! Pixel/microlens relative illumination applied at the sensor (issue 5 item 4):
+//! the models, the `relative-illumination` block of a sensor file, and the
+//! `field_height_mm,relative_illumination` CSV that `camsim lens ri` writes.
+
+use crate::diag::{Error, Located, did_you_mean};
+use kdl::{KdlNode, KdlValue};
+use std::path::Path;
+
+use super::config_file::loc;
+
+/// Pixel/microlens relative illumination applied at the sensor (issue 5 item 4),
+/// as a function of image-side field height from the sensor centre.
+#[derive(Clone, Debug, PartialEq)]
+pub enum RelativeIllumination {
+    None,
+    /// cos^n of the chief-ray angle atan(h / distance).
+    CosN {
+        n: f64,
+        distance_mm: f64,
+    },
+    /// Measured table, linear in field height; beyond the last point the last value holds.
+    Table {
+        field_height_mm: Vec<f64>,
+        value: Vec<f64>,
+    },
+}
+
+impl RelativeIllumination {
+    /// Relative illumination at field height `h_mm` (1 on axis for the models above).
+    pub fn at(&self, h_mm: f64) -> f64 {
+        match self {
+            RelativeIllumination::None => 1.0,
+            RelativeIllumination::CosN { n, distance_mm } => {
+                let c = distance_mm / (distance_mm * distance_mm + h_mm * h_mm).sqrt();
+                c.powf(*n)
+            }
+            RelativeIllumination::Table {
+                field_height_mm: h,
+                value: v,
+            } => {
+                if h_mm <= h[0] {
+                    return v[0];
+                }
+                let i = h.partition_point(|&x| x < h_mm);
+                if i >= h.len() {
+                    return v[v.len() - 1];
+                }
+                let t = (h_mm - h[i - 1]) / (h[i] - h[i - 1]);
+                v[i - 1] + t * (v[i] - v[i - 1])
+            }
+        }
+    }
+}
+
+/// Parse the `relative-illumination` node of a sensor file (`base`: the file's directory).
+pub(super) fn parse_ri(
+    node: &KdlNode,
+    base: &Path,
+    path: &Path,
+    text: &str,
+) -> crate::Result<RelativeIllumination> {
+    let args: Vec<_> = node
+        .entries()
+        .iter()
+        .filter(|e| e.name().is_none())
+        .collect();
+    let model = match args.as_slice() {
+        [a] => a.value().as_string().map(str::to_string).ok_or_else(|| {
+            loc(
+                path,
+                text,
+                a.span(),
+                "relative-illumination model is a string: \"none\", \"cos-n\" or \"table\"".into(),
+            )
+        })?,
+        _ => {
+            return Err(loc(
+                path,
+                text,
+                node.span(),
+                "relative-illumination takes one model name: \"none\", \"cos-n\" or \"table\""
+                    .into(),
+            ));
+        }
+    };
+    let prop = |n: &str| {
+        node.entries()
+            .iter()
+            .find(|e| e.name().map(|i| i.value()) == Some(n))
+    };
+    let allowed: &[&str] = match model.as_str() {
+        "none" => &[],
+        "cos-n" => &["n", "distance-mm"],
+        "table" => &["file"],
+        m => {
+            let hint =
+                did_you_mean(m, ["none", "cos-n", "table"]).map(|s| format!("did you mean '{s}'?"));
+            return Err(Error::from(
+                Located::at_offset(
+                    path,
+                    text,
+                    args[0].span().offset(),
+                    args[0].span().len(),
+                    format!("unknown relative-illumination model '{m}'"),
+                )
+                .with_help_opt(hint),
+            ));
+        }
+    };
+    for e in node.entries() {
+        if let Some(n) = e.name()
+            && !allowed.contains(&n.value())
+        {
+            let hint = did_you_mean(n.value(), allowed.iter().copied())
+                .map(|s| format!("did you mean '{s}'?"));
+            return Err(Error::from(
+                Located::at_offset(
+                    path,
+                    text,
+                    e.span().offset(),
+                    e.span().len(),
+                    format!(
+                        "'{}' is not a property of model '{model}' (allowed: {allowed:?})",
+                        n.value()
+                    ),
+                )
+                .with_help_opt(hint),
+            ));
+        }
+    }
+    let number = |n: &str| -> crate::Result<f64> {
+        let e = prop(n).ok_or_else(|| {
+            loc(
+                path,
+                text,
+                node.span(),
+                format!("model '{model}' needs {n}=…"),
+            )
+        })?;
+        match e.value() {
+            KdlValue::Integer(i) => Ok(*i as f64),
+            KdlValue::Float(x) if x.is_finite() => Ok(*x),
+            _ => Err(loc(path, text, e.span(), format!("'{n}' expects a number"))),
+        }
+    };
+    match model.as_str() {
+        "none" => Ok(RelativeIllumination::None),
+        "cos-n" => {
+            let n = number("n")?;
+            let d = number("distance-mm")?;
+            if n < 0.0 || d <= 0.0 {
+                return Err(loc(
+                    path,
+                    text,
+                    node.span(),
+                    format!("cos-n needs n ≥ 0 and distance-mm > 0, found n={n}, distance-mm={d}"),
+                ));
+            }
+            Ok(RelativeIllumination::CosN { n, distance_mm: d })
+        }
+        _ => {
+            if let Some(ch) = node.children() {
+                if prop("file").is_some() {
+                    return Err(loc(
+                        path,
+                        text,
+                        node.span(),
+                        "give the table as file=… or as point children, not both".into(),
+                    ));
+                }
+                let mut h = vec![];
+                let mut v = vec![];
+                for p in ch.nodes() {
+                    if p.name().value() != "point" {
+                        return Err(loc(
+                            path,
+                            text,
+                            p.name().span(),
+                            format!(
+                                "expected 'point field-height-mm=… value=…', found '{}'",
+                                p.name().value()
+                            ),
+                        ));
+                    }
+                    let get = |n: &str| -> crate::Result<f64> {
+                        let e = p
+                            .entries()
+                            .iter()
+                            .find(|e| e.name().map(|i| i.value()) == Some(n))
+                            .ok_or_else(|| {
+                                loc(path, text, p.span(), format!("'point' needs {n}=…"))
+                            })?;
+                        match e.value() {
+                            KdlValue::Integer(i) => Ok(*i as f64),
+                            KdlValue::Float(x) if x.is_finite() => Ok(*x),
+                            _ => Err(loc(path, text, e.span(), format!("'{n}' expects a number"))),
+                        }
+                    };
+                    for e in p.entries() {
+                        let ok = e.name().is_some_and(|n| {
+                            n.value() == "field-height-mm" || n.value() == "value"
+                        });
+                        if !ok {
+                            let hint = e
+                                .name()
+                                .and_then(|n| did_you_mean(n.value(), ["field-height-mm", "value"]))
+                                .map(|s| format!("did you mean '{s}'?"));
+                            return Err(Error::from(
+                                Located::at_offset(
+                                    path,
+                                    text,
+                                    e.span().offset(),
+                                    e.span().len(),
+                                    "'point' takes field-height-mm=… value=…",
+                                )
+                                .with_help_opt(hint),
+                            ));
+                        }
+                    }
+                    h.push(get("field-height-mm")?);
+                    v.push(get("value")?);
+                }
+                table(h, v).map_err(|m| loc(path, text, node.span(), m))
+            } else {
+                let e = prop("file").ok_or_else(|| {
+                    loc(
+                        path,
+                        text,
+                        node.span(),
+                        "table needs file=\"ri.csv\" or point children".into(),
+                    )
+                })?;
+                let f = e.value().as_string().ok_or_else(|| {
+                    loc(path, text, e.span(), "'file' expects a path string".into())
+                })?;
+                let p = base.join(f);
+                let (h, v) = read_ri_csv(&p).map_err(|m| loc(path, text, e.span(), m))?;
+                table(h, v).map_err(|m| loc(path, text, e.span(), format!("{}: {m}", p.display())))
+            }
+        }
+    }
+}
+
+fn table(h: Vec<f64>, v: Vec<f64>) -> Result<RelativeIllumination, String> {
+    if h.is_empty() {
+        return Err("relative-illumination table is empty".into());
+    }
+    for i in 1..h.len() {
+        if h[i] <= h[i - 1] {
+            return Err(format!(
+                "field heights must increase ({} then {} mm)",
+                h[i - 1],
+                h[i]
+            ));
+        }
+    }
+    if h.iter().chain(&v).any(|x| !x.is_finite()) || v.iter().any(|&x| x < 0.0) || h[0] < 0.0 {
+        return Err("relative-illumination values must be finite and ≥ 0".into());
+    }
+    Ok(RelativeIllumination::Table {
+        field_height_mm: h,
+        value: v,
+    })
+}
+
+/// Read `field_height_mm,relative_illumination` CSV (the output of `camsim lens ri`;
+/// `#` comment lines allowed).
+pub fn read_ri_csv(p: &Path) -> Result<(Vec<f64>, Vec<f64>), String> {
+    let t = std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()))?;
+    let mut lines = t
+        .lines()
+        .filter(|l| !l.trim().is_empty() && !l.trim_start().starts_with('#'));
+    let header = lines
+        .next()
+        .ok_or_else(|| format!("{}: empty file", p.display()))?;
+    let cols: Vec<&str> = header.split(',').map(str::trim).collect();
+    let hi = cols.iter().position(|c| *c == "field_height_mm");
+    let vi = cols.iter().position(|c| *c == "relative_illumination");
+    let (Some(hi), Some(vi)) = (hi, vi) else {
+        return Err(format!(
+            "{}: header must name field_height_mm and relative_illumination, found '{header}'",
+            p.display()
+        ));
+    };
+    let (mut h, mut v) = (vec![], vec![]);
+    for (n, l) in lines.enumerate() {
+        let f: Vec<&str> = l.split(',').map(str::trim).collect();
+        let g = |i: usize| -> Result<f64, String> {
+            f.get(i)
+                .and_then(|s| s.parse::<f64>().ok())
+                .ok_or_else(|| format!("{}: data row {}: bad number in '{l}'", p.display(), n + 1))
+        };
+        h.push(g(hi)?);
+        v.push(g(vi)?);
+    }
+    Ok((h, v))
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::sensor::SensorConfig;
+    use std::path::Path;
+
+    fn parse(s: &str) -> crate::Result<SensorConfig> {
+        SensorConfig::parse(s, Path::new("t.kdl"))
+    }
+
+    #[test]
+    fn relative_illumination_models() {
+        let c = parse("relative-illumination \"cos-n\" n=4 distance-mm=4.0\n").unwrap();
+        let ri = &c.relative_illumination;
+        assert_eq!(ri.at(0.0), 1.0);
+        let expect = (4.0f64 / (16.0f64 + 9.0).sqrt()).powi(4);
+        assert!((ri.at(3.0) - expect).abs() < 1e-12);
+        let c = parse("relative-illumination \"table\" {\n point field-height-mm=0 value=1\n point field-height-mm=2 value=0.5\n}\n").unwrap();
+        assert!((c.relative_illumination.at(1.0) - 0.75).abs() < 1e-12);
+        assert_eq!(c.relative_illumination.at(5.0), 0.5);
+        let e = parse("relative-illumination \"cos-n\" n=4 distance=4.0\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("distance-mm"), "{e}");
+    }
+}
