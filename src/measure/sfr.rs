@@ -947,7 +947,7 @@ pub static SCHEMA: crate::params::Schema = crate::params::Schema {
     params: &[
         super::request::name_param(),
         super::request::of_param(
-            "the slanted-edge object whose edge is measured (more as arguments: `\"edge-near\" \"edge-far\"`); figures are prefixed `<object>/`",
+            "the slanted-edge object whose edge is measured (more as arguments: `\"edge-near\" \"edge-far\"`); figures are prefixed `<object>/` (`roi/` with roi-px alone, the input's name on a capture)",
             "\"edge-far\"",
         ),
         super::request::input_param(),
