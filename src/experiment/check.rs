@@ -57,40 +57,6 @@ pub fn check_stages(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError)>
 }
 
 /// A measurement's options, built as `run` builds them.
-fn check_measure(kind: &str, params: &Params, _dir: &Path) -> Result<(), ParamError> {
-    match kind {
-        "colorimetry" => validate_colorimetry(params),
-        _ => Ok(()),
-    }
-}
-
-/// `measure "colorimetry" spectrum="cie-d65" [wavelength-nm=(380 780 5)]`.
-fn validate_colorimetry(p: &Params) -> Result<(), ParamError> {
-    const KNOWN: &[&str] = &["spectrum", "wavelength-nm"];
-    if let Some(u) = p.unknown(KNOWN).first() {
-        return Err(ParamError::unknown(u, KNOWN));
-    }
-    match p.get("spectrum") {
-        None => Err(ParamError::new(
-            None,
-            "colorimetry needs spectrum=\"<name>\" (e.g. spectrum=\"cie-d65\")",
-        )),
-        Some(crate::params::Value::String(s)) => {
-            if s.contains('#') {
-                return Ok(()); // a CSV column; read (and checked) when the variant runs
-            }
-            crate::spectrum::library::named(s).map(|_| ()).map_err(|e| {
-                let mut err = ParamError::new(Some("spectrum"), e.clone()).at_value();
-                if let Some(i) = e.find("(did you mean") {
-                    err.help = Some(e[i + 1..e.len() - 1].to_string());
-                    err.message = e[..i].trim().to_string();
-                }
-                err
-            })
-        }
-        Some(v) => Err(ParamError::new(
-            Some("spectrum"),
-            format!("spectrum: expected a string, found {v}"),
-        )),
-    }
+fn check_measure(kind: &str, params: &Params, dir: &Path) -> Result<(), ParamError> {
+    crate::measure::request::checked(kind, params, dir).map(|_| ())
 }

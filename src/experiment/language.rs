@@ -135,6 +135,7 @@ pub fn schemas() -> Vec<&'static Schema> {
         &crate::scene::camera_params::LENS_FILE_SCHEMA,
         &crate::scene::camera_params::LENS_MODEL_SCHEMA,
         &RENDER_SCHEMA,
+        &crate::sensor::SCHEMA,
     ];
     v.extend(
         crate::scene::edits::Target::ALL
@@ -142,6 +143,7 @@ pub fn schemas() -> Vec<&'static Schema> {
             .map(|t| crate::scene::edits::addition_schema(*t)),
     );
     v.push(&crate::scene::edits::OVERRIDE_SCHEMA);
+    v.extend(crate::measure::request::schemas());
     v.push(&MEASURED_SCHEMA);
     v
 }

@@ -34,18 +34,20 @@
 //!   standard error collapses with the noise, not as t^(−½)); they get a
 //!   `<q>/clipped_fraction` figure instead.
 
-use super::apply::{ApplyError, as_int, as_str, describe};
+use super::apply::ApplyError;
 use super::source::Span;
 use super::spec::{Measure, MeasuredInput, ResolvedExperiment};
 use super::stages;
 use crate::figure::Figure;
 use crate::image::SensorImage;
-use crate::measure::Measured;
 use crate::measure::io::{LoadedImage, read_image, read_label_map_for};
+use crate::measure::request::{self, MeasureOptions};
+use crate::measure::{Measured, sfr::SfrChannel};
 use crate::optical_image::{OpticalImage, Rect};
-use crate::params::Value;
+use crate::params::ParamError;
 use crate::{Error, Result};
 use std::collections::BTreeMap;
+use std::path::Path;
 use std::time::Instant;
 
 /// Measurement kinds that can read a captured image (`input=`).
@@ -76,58 +78,76 @@ pub fn check_input_name<'a>(
     Err(e)
 }
 
-/// `roi-px=(x y w h)`: non-negative integers, w and h ≥ 1.
-pub fn roi_px(v: &Value) -> Result<Rect, ApplyError> {
-    let bad = || {
-        ApplyError::new(format!(
-            "'roi-px': expected (x y w h) in pixels, found {}",
-            describe(v)
-        ))
-        .help("e.g. roi-px=(100 80 64 128): left, top, width, height")
-    };
-    let Value::List(l) = v else { return Err(bad()) };
-    if l.len() != 4 {
-        return Err(bad());
-    }
-    let mut x = [0u32; 4];
-    for (o, e) in x.iter_mut().zip(l) {
-        *o = as_int(e, "roi-px", 0, u32::MAX as u64)? as u32;
-    }
-    if x[2] == 0 || x[3] == 0 {
-        return Err(
-            ApplyError::new("'roi-px': width and height must be ≥ 1").help("roi-px=(x y w h)")
-        );
-    }
-    Ok(Rect::new(x[0], x[1], x[2], x[3]))
+/// The directory a measurement's relative files are resolved against.
+fn base_dir(spec: &ResolvedExperiment) -> &Path {
+    spec.file.parent().unwrap_or(Path::new("."))
 }
 
-/// Parse-time checks of the references between nodes: `input=` names a
+/// A [`ParamError`] of measurement `m`, at its property's name or value.
+fn locate(m: &Measure, e: ParamError) -> (Span, ApplyError) {
+    let span = match &e.name {
+        Some(n) if e.on_value => m.spans.value_at(n, m.span),
+        Some(n) => m.spans.name_at(n, m.span),
+        None => m.span,
+    };
+    (
+        span,
+        ApplyError {
+            message: e.message,
+            help: e.help,
+            on_path: false,
+        },
+    )
+}
+
+/// The options of measurement `m` ([`request::checked`], as `check` reads them).
+pub fn options_of(m: &Measure, spec: &ResolvedExperiment) -> Result<MeasureOptions> {
+    request::checked(&m.kind, &m.params, base_dir(spec))
+        .map_err(|e| Error::invalid(format!("measurement '{}': {e}", m.name)))
+}
+
+/// Check-time checks of every measurement: its options
+/// ([`request::checked`]: unknown, misspelt, wrong-typed or out-of-range
+/// properties), then the references between nodes: `input=` names a
 /// `measured` node (and what the kind needs of it), `compare` and
-/// `convergence` name other measurements. Errors point at the value.
+/// `convergence` name other measurements. Errors point at the property.
 pub fn check_references(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError)> {
     for m in &spec.measures {
         let at = |k: &str| m.spans.value_at(k, m.span);
-        if let Some(v) = m.params.get("input") {
-            let name = as_str(v, "input").map_err(|e| (at("input"), e))?;
+        if m.params.get("input").is_some() && !INPUT_KINDS.contains(&m.kind.as_str()) {
+            return Err((
+                at("input"),
+                ApplyError::new(format!(
+                    "measurement '{}' cannot read a captured image; kinds that can: {}",
+                    m.kind,
+                    INPUT_KINDS.join(", ")
+                )),
+            ));
+        }
+        let opts =
+            request::checked(&m.kind, &m.params, base_dir(spec)).map_err(|e| locate(m, e))?;
+        let takes_of = request::schema(&m.kind).is_some_and(|s| s.get("of").is_some());
+        if !m.of.is_empty() && !takes_of {
+            return Err((
+                at("of"),
+                ApplyError::new(format!(
+                    "measure \"{}\" takes no of= (it reads {})",
+                    m.kind,
+                    if m.kind == "colorimetry" {
+                        "a spectrum"
+                    } else {
+                        "the whole image, or roi-px"
+                    }
+                )),
+            ));
+        }
+        if let Some(name) = opts.input() {
             let c = check_input_name(spec, name).map_err(|e| (at("input"), e))?;
-            if !INPUT_KINDS.contains(&m.kind.as_str()) {
-                return Err((
-                    at("input"),
-                    ApplyError::new(format!(
-                        "measurement '{}' cannot read a captured image; kinds that can: {}",
-                        m.kind,
-                        INPUT_KINDS.join(", ")
-                    )),
-                ));
-            }
-            if let Some(r) = m.params.get("roi-px") {
-                roi_px(r).map_err(|e| (at("roi-px"), e))?;
-            }
             let labelled = c.labels.is_some();
             let need =
                 |msg: String, help: &str| Err((at("input"), ApplyError::new(msg).help(help)));
-            match m.kind.as_str() {
-                "sfr" if m.params.get("roi-px").is_none() && (m.of.is_empty() || !labelled) => {
+            match &opts {
+                MeasureOptions::Sfr(r) if r.roi_px.is_none() && (m.of.is_empty() || !labelled) => {
                     return need(
                         format!(
                             "sfr on the captured image '{name}' needs roi-px=(x y w h) around the edge"
@@ -135,7 +155,7 @@ pub fn check_references(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyErr
                         "captures carry no object labels; or give the capture labels=… names=… and of=\"<object>\"",
                     );
                 }
-                "mcc" | "profile" if !labelled => {
+                MeasureOptions::Mcc(_) | MeasureOptions::Profile(_) if !labelled => {
                     return need(
                         format!(
                             "{} on the captured image '{name}' needs its label map",
@@ -144,7 +164,7 @@ pub fn check_references(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyErr
                         "add labels=\"labels.png\" names=\"names.txt\" to the measured node",
                     );
                 }
-                "noise" if m.params.get("conversion-gain-dv-e").is_none() => {
+                MeasureOptions::Noise(r) if r.conversion_gain_dv_per_e.is_none() => {
                     return need(
                         format!(
                             "noise on the captured image '{name}' needs conversion-gain-dv-e=…"
@@ -154,25 +174,24 @@ pub fn check_references(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyErr
                 }
                 _ => {}
             }
+        } else if let MeasureOptions::Ri(r) = &opts
+            && r.channel.is_some()
+        {
+            return Err((
+                m.spans.name_at("channel", m.span),
+                ApplyError::new(
+                    "ri of the rendered optical image reads band-integrated irradiance; channel= applies to a captured image (input=…)",
+                ),
+            ));
         }
-        match m.kind.as_str() {
-            "compare" => {
-                let of = known_and_single_of(
+        match &opts {
+            MeasureOptions::Compare(c) => {
+                let of = single_of(
                     m,
-                    &["reference", "quantity", "normalize"],
                     "e.g. measure \"compare\" of=\"mcc\" reference=\"mcc-measured\"",
                 )?;
                 check_measurement_ref(spec, m, of).map_err(|e| (at("of"), e))?;
-                let r = match m.params.get("reference") {
-                    Some(v) => as_str(v, "reference").map_err(|e| (at("reference"), e))?,
-                    None => {
-                        return Err((
-                            m.span,
-                            ApplyError::new("compare needs reference=\"<measurement>\"")
-                                .help("e.g. reference=\"mcc-measured\", a measurement of a captured image"),
-                        ));
-                    }
-                };
+                let r = c.reference.as_deref().unwrap_or_default();
                 check_measurement_ref(spec, m, r).map_err(|e| (at("reference"), e))?;
                 if r == of {
                     return Err((
@@ -180,27 +199,9 @@ pub fn check_references(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyErr
                         ApplyError::new("compare: of and reference name the same measurement"),
                     ));
                 }
-                if let Some(v) = m.params.get("normalize") {
-                    let s = as_str(v, "normalize").map_err(|e| (at("normalize"), e))?;
-                    if !matches!(s, "none" | "mean") {
-                        return Err((
-                            at("normalize"),
-                            ApplyError::new(format!(
-                                "normalize: expected \"none\" or \"mean\", found \"{s}\""
-                            )),
-                        ));
-                    }
-                }
-                if let Some(v) = m.params.get("quantity") {
-                    as_str(v, "quantity").map_err(|e| (at("quantity"), e))?;
-                }
             }
-            "convergence" => {
-                let of = known_and_single_of(
-                    m,
-                    &["spp", "reference-spp", "quantity"],
-                    "e.g. measure \"convergence\" of=\"sfr\" spp=(16 64 256)",
-                )?;
+            MeasureOptions::Convergence(_) => {
+                let of = single_of(m, "e.g. measure \"convergence\" of=\"sfr\" spp=(16 64 256)")?;
                 let t = check_measurement_ref(spec, m, of).map_err(|e| (at("of"), e))?;
                 if !CONVERGENCE_KINDS.contains(&t.kind.as_str()) || t.params.get("input").is_some()
                 {
@@ -218,14 +219,6 @@ pub fn check_references(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyErr
                         )),
                     ));
                 }
-                spp_list(m).map_err(|e| (at("spp"), e))?;
-                if let Some(v) = m.params.get("reference-spp") {
-                    as_int(v, "reference-spp", 1, 1_000_000_000)
-                        .map_err(|e| (at("reference-spp"), e))?;
-                }
-                if let Some(v) = m.params.get("quantity") {
-                    as_str(v, "quantity").map_err(|e| (at("quantity"), e))?;
-                }
             }
             _ => {}
         }
@@ -233,25 +226,8 @@ pub fn check_references(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyErr
     Ok(())
 }
 
-/// The checks `compare` and `convergence` share: only the `known` properties
-/// (an unknown one is reported at its name, with a did-you-mean), and exactly
-/// one `of=` measurement, which is returned.
-fn known_and_single_of<'a>(
-    m: &'a Measure,
-    known: &[&str],
-    example: &str,
-) -> Result<&'a str, (Span, ApplyError)> {
-    if let Some(u) = m.params.unknown(known).first() {
-        let e = crate::params::ParamError::unknown(u, known);
-        return Err((
-            m.spans.name_at(u, m.span),
-            ApplyError {
-                message: e.message,
-                help: e.help,
-                on_path: false,
-            },
-        ));
-    }
+/// Exactly one `of=` measurement (compare, convergence), which is returned.
+fn single_of<'a>(m: &'a Measure, example: &str) -> Result<&'a str, (Span, ApplyError)> {
     match m.of.as_slice() {
         [one] => Ok(one.as_str()),
         _ => Err((
@@ -301,36 +277,6 @@ fn check_measurement_ref<'a>(
     }
 }
 
-/// `spp=(16 64 256)`: at least two strictly increasing sample counts.
-fn spp_list(m: &Measure) -> Result<Vec<u64>, ApplyError> {
-    let help = "e.g. spp=(16 64 256): at least two increasing sample counts";
-    let v = m
-        .params
-        .get("spp")
-        .ok_or_else(|| ApplyError::new("convergence needs spp=(…)").help(help))?;
-    let l = match v {
-        Value::List(l) => l.clone(),
-        other => {
-            return Err(ApplyError::new(format!(
-                "'spp': expected a list of sample counts, found {}",
-                describe(other)
-            ))
-            .help(help));
-        }
-    };
-    let s: Vec<u64> = l
-        .iter()
-        .map(|x| as_int(x, "spp", 1, 1_000_000_000))
-        .collect::<Result<_, _>>()?;
-    if s.len() < 2 || s.windows(2).any(|w| w[1] <= w[0]) {
-        return Err(ApplyError::new(
-            "'spp': expected at least two strictly increasing sample counts",
-        )
-        .help(help));
-    }
-    Ok(s)
-}
-
 /// Stages a measurement needs, given its properties: measurements of a
 /// captured image (`input=`), `compare` and `convergence` (which renders on
 /// its own) need none of the variant's stages.
@@ -371,20 +317,6 @@ pub fn measure_capture(
 ) -> Result<Measured> {
     let img = &cap.image;
     let err = |e: Error| Error::io(&img.path, e);
-    let str_param = |k: &str, d: &'static str| -> Result<String> {
-        Ok(m.params
-            .str(k)
-            .map_err(Error::invalid)?
-            .unwrap_or(d)
-            .to_string())
-    };
-    let roi = match m.params.get("roi-px") {
-        Some(v) => Some(
-            roi_px(v)
-                .map_err(|e| Error::invalid(format!("measurement '{}': {}", m.name, e.message)))?,
-        ),
-        None => None,
-    };
     let views_labels = || -> Result<&(Vec<u32>, Vec<String>)> {
         cap.labels.as_ref().ok_or_else(|| {
             Error::invalid(format!(
@@ -393,89 +325,109 @@ pub fn measure_capture(
             ))
         })
     };
-    match m.kind.as_str() {
-        "sfr" => {
-            let channel = str_param("channel", "lum")?;
-            let plane = img.plane_for(&channel)?;
+    match options_of(m, spec)? {
+        MeasureOptions::Sfr(r) => {
+            let channel = match &r.options.channel {
+                SfrChannel::Lum => "lum",
+                SfrChannel::Named(c) => c.as_str(),
+            };
+            let plane = img.plane_for(channel)?;
             let opts = crate::measure::sfr::SfrOptions {
-                channel: crate::measure::sfr::SfrChannel::parse(&channel)?,
                 pixel_pitch_m: cap.pixel_pitch_m,
-                ..Default::default()
+                ..r.options.clone()
             };
             let mut regions = vec![];
-            match roi {
-                Some(r) => regions.push((input.to_string(), r)),
+            match r.roi_px {
+                Some(roi) => regions.push((input.to_string(), roi)),
                 None => {
                     let (labels, names) = views_labels()?;
                     for o in &m.of {
-                        let r = crate::measure::sfr::object_roi(
+                        let roi = crate::measure::sfr::object_roi(
                             labels, names, img.width, img.height, o,
                         )
                         .map_err(err)?;
-                        regions.push((o.clone(), r));
+                        regions.push((o.clone(), roi));
                     }
                 }
             }
             let mut out = Measured::default();
-            for (p, r) in regions {
-                let (sfr, r) = crate::measure::sfr::sfr_of_region(&plane, r, &opts).map_err(err)?;
-                let x = sfr.measured(&m.name, r).prefixed(&p);
+            for (p, roi) in regions {
+                let (sfr, roi) =
+                    crate::measure::sfr::sfr_of_region(&plane, roi, &opts).map_err(err)?;
+                let x = sfr.measured(&m.name, roi).prefixed(&p);
                 out.figures.extend(x.figures);
                 out.curves.extend(x.curves);
                 out.pixels_read.extend(x.pixels_read);
             }
             Ok(out)
         }
-        "mcc" => {
+        MeasureOptions::Mcc(r) => {
             let (labels, names) = views_labels()?;
             let chart = m.of.first().map(String::as_str).unwrap_or("mcc");
-            let patches =
-                crate::measure::mcc::patch_means(&img.views(), labels, names, chart, 0.25)
-                    .map_err(err)?;
+            let patches = crate::measure::mcc::patch_means(
+                &img.views(),
+                labels,
+                names,
+                chart,
+                r.inset_fraction,
+            )
+            .map_err(err)?;
             Ok(crate::measure::mcc::measured(&patches, &m.name))
         }
-        "profile" => {
+        MeasureOptions::Profile(r) => {
             let (labels, names) = views_labels()?;
             let opts = crate::measure::profile::ProfileOptions {
                 step_px: if img.mosaic.is_some() { 2 } else { 1 },
-                ..Default::default()
+                ..r.options.clone()
             };
             crate::measure::profile::profile(&img.views(), labels, names, &m.of, &opts, &m.name)
                 .map_err(err)
         }
-        "noise" => {
-            let channel = str_param("channel", "g")?;
-            let mut plane = img.plane_for(&channel)?;
-            if let Some(r) = roi {
-                plane = plane.crop(r).map_err(err)?;
+        MeasureOptions::Noise(r) => {
+            let mut plane = img.plane_for(&r.options.channel)?;
+            if let Some(roi) = r.roi_px {
+                plane = plane.crop(roi).map_err(err)?;
             }
-            let k = m
-                .params
-                .f64("conversion-gain-dv-e")
-                .map_err(Error::invalid)?
+            let k = r
+                .conversion_gain_dv_per_e
                 .ok_or_else(|| Error::invalid("noise on a capture needs conversion-gain-dv-e"))?;
             let opts = crate::measure::noise::NoiseOptions {
                 conversion_gain_dv_per_e: k,
-                seed: spec.render.seed,
-                channel,
-                ..Default::default()
+                seed: r.seed.unwrap_or(spec.render.seed),
+                ..r.options.clone()
             };
             Ok(crate::measure::noise::measure(&plane, &opts, &m.name)
                 .map_err(err)?
                 .0)
         }
-        "ri" => {
-            let channel = str_param("channel", "g")?;
+        MeasureOptions::Ri(r) => {
+            let channel = r.channel.clone().unwrap_or_else(|| "g".into());
             let plane = img.plane_for(&channel)?;
             let opts = crate::measure::ri::RiOptions {
                 pixel_pitch_m: cap.pixel_pitch_m,
+                center_px: r.center_px,
+                bins: r.bins,
                 channel,
-                ..Default::default()
             };
             crate::measure::ri::relative_illumination(&plane, &opts, &m.name).map_err(err)
         }
-        k => Err(Error::invalid(format!(
-            "measurement '{k}' cannot read a captured image"
+        o => Err(Error::invalid(format!(
+            "measurement '{}' cannot read a captured image",
+            o.kind()
+        ))),
+    }
+}
+
+/// The compare options of `m` (an error for another kind).
+fn compare_options(m: &Measure) -> Result<crate::measure::compare::CompareOptions> {
+    match request::checked(&m.kind, &m.params, Path::new("."))
+        .map_err(|e| Error::invalid(format!("measurement '{}': {e}", m.name)))?
+    {
+        MeasureOptions::Compare(c) => Ok(c),
+        o => Err(Error::invalid(format!(
+            "measurement '{}' is a '{}', not a compare",
+            m.name,
+            o.kind()
         ))),
     }
 }
@@ -483,12 +435,8 @@ pub fn measure_capture(
 /// `compare`: pair the figures of measurement `of` (simulated) and
 /// `reference` by quantity and unit, optionally filtered and normalised.
 pub fn compare(m: &Measure, of: &Measured, reference: &Measured) -> Result<Measured> {
-    let filter = m.params.str("quantity").map_err(Error::invalid)?;
-    let normalize = m
-        .params
-        .str("normalize")
-        .map_err(Error::invalid)?
-        .unwrap_or("none");
+    let opts = compare_options(m)?;
+    let filter = opts.quantity.as_deref();
     let keep = |f: &&Figure| filter.is_none_or(|q| f.quantity.contains(q));
     let refs: BTreeMap<&str, &Figure> = reference
         .figures
@@ -530,7 +478,7 @@ pub fn compare(m: &Measure, of: &Measured, reference: &Measured) -> Result<Measu
         )));
     }
     let mut unit = unit.unwrap_or("1").to_string();
-    if normalize == "mean" {
+    if opts.normalize_mean {
         let n = pairs.len() as f64;
         let ms = pairs.iter().map(|p| p.simulated).sum::<f64>() / n;
         let mr = pairs.iter().map(|p| p.reference).sum::<f64>() / n;
@@ -555,8 +503,12 @@ pub fn compare(m: &Measure, of: &Measured, reference: &Measured) -> Result<Measu
 /// `convergence`: render the target measurement's region at each spp and
 /// follow each of its figures' standard error against render time.
 pub fn convergence(m: &Measure, spec: &ResolvedExperiment) -> Result<Measured> {
-    let bad = |e: ApplyError| Error::invalid(format!("measurement '{}': {}", m.name, e.message));
-    let spps = spp_list(m).map_err(bad)?;
+    let MeasureOptions::Convergence(opts) = options_of(m, spec)? else {
+        return Err(Error::invalid(format!(
+            "measurement '{}' is not a convergence",
+            m.name
+        )));
+    };
     let of =
         m.of.first()
             .ok_or_else(|| Error::invalid("convergence needs of=\"<measurement>\""))?;
@@ -565,11 +517,7 @@ pub fn convergence(m: &Measure, spec: &ResolvedExperiment) -> Result<Measured> {
         .iter()
         .find(|x| &x.name == of)
         .ok_or_else(|| Error::invalid(format!("convergence: no measurement '{of}'")))?;
-    let filter = m.params.str("quantity").map_err(Error::invalid)?;
-    let reference_spp = match m.params.get("reference-spp") {
-        Some(v) => Some(as_int(v, "reference-spp", 1, 1_000_000_000).map_err(bad)?),
-        None => None,
-    };
+    let filter = opts.quantity.as_deref();
     let mut sub = spec.clone();
     sub.measures = vec![target.clone()];
     let scene = stages::build_scene(&sub)?;
@@ -594,10 +542,10 @@ pub fn convergence(m: &Measure, spec: &ResolvedExperiment) -> Result<Measured> {
         ))
     };
     let mut runs = vec![];
-    for (k, &spp) in spps.iter().enumerate() {
+    for (k, &spp) in opts.spp.iter().enumerate() {
         runs.push((spp, run_at(spp, spec.render.seed + 1 + k as u64)?));
     }
-    let reference = match reference_spp {
+    let reference = match opts.reference_spp {
         Some(r) => Some(run_at(r, spec.render.seed)?.0),
         None => None,
     };
@@ -724,12 +672,8 @@ pub fn measure_all(
                         })
                 };
                 let of = m.of.first().map(String::as_str).unwrap_or("");
-                let reference = m
-                    .params
-                    .str("reference")
-                    .map_err(Error::invalid)?
-                    .unwrap_or("");
-                compare(m, get(of)?, get(reference)?)?
+                let reference = compare_options(m)?.reference.unwrap_or_default();
+                compare(m, get(of)?, get(&reference)?)?
             } else if m.kind == "convergence" {
                 convergence(m, spec)?
             } else if let Some(input) = m.params.str("input").map_err(Error::invalid)? {

@@ -8,8 +8,6 @@ use super::spec::{Addition, Measure, ResolvedExperiment};
 use crate::figure::Figure;
 use crate::image::SensorImage;
 use crate::measure::Measured;
-use crate::measure::plane::Plane;
-use crate::measure::sfr::{SfrChannel, SfrOptions};
 use crate::optical_image::{OpticalImage, Rect};
 use crate::optics::Camera;
 use crate::params::ParamError;
@@ -36,16 +34,10 @@ pub struct Needs {
 /// only; `ri` and `convergence` can work on the optical image; every other
 /// kind measures sensor digital values.
 pub fn needs(kind: &str) -> Needs {
-    match kind {
-        "colorimetry" => Needs::default(),
-        "ri" | "convergence" => Needs {
-            optical_image: true,
-            sensor_image: false,
-        },
-        _ => Needs {
-            optical_image: true,
-            sensor_image: true,
-        },
+    let n = crate::measure::request::needs(kind);
+    Needs {
+        optical_image: n.optical_image,
+        sensor_image: n.sensor_image,
     }
 }
 
@@ -344,6 +336,8 @@ fn label_box(labels: &[u32], names: &[String], w: u32, h: u32, name: &str) -> Op
 }
 
 /// Run one measurement: figures for results.csv and curves for the report.
+/// Its options are read by [`crate::measure::request::checked`] (as at
+/// `check`) and it runs in [`crate::measure::request::run`].
 pub fn measure(
     m: &Measure,
     spec: &ResolvedExperiment,
@@ -351,163 +345,34 @@ pub fn measure(
     si: Option<&SensorImage>,
     object_rects: &BTreeMap<String, Rect>,
 ) -> Result<Measured> {
-    let need_si = || {
-        si.ok_or_else(|| Error::invalid(format!("measurement '{}' needs a sensor image", m.name)))
+    let dir = spec.file.parent().unwrap_or(Path::new("."));
+    let opts = crate::measure::request::checked(&m.kind, &m.params, dir)
+        .map_err(|e| Error::invalid(format!("measurement '{}': {e}", m.name)))?;
+    let inputs = crate::measure::request::Inputs {
+        oi,
+        si,
+        object_rects,
+        seed: spec.render.seed,
+        grid: &spec.render.wavelength,
     };
-    match m.kind.as_str() {
-        "colorimetry" => Ok(Measured {
-            figures: colorimetry(m, spec)?,
-            ..Default::default()
-        }),
-        "sfr" => {
-            let si = need_si()?;
-            let plane = Plane::from_sensor(si)?;
-            let channel = m
-                .params
-                .str("channel")
-                .map_err(Error::invalid)?
-                .unwrap_or("lum");
-            let opts = SfrOptions {
-                channel: SfrChannel::parse(channel)?,
-                pixel_pitch_m: Some(si.pixel_pitch_m),
-                ..Default::default()
-            };
-            if m.of.is_empty() {
-                return Err(Error::invalid(format!(
-                    "measurement '{}': sfr needs of=\"<edge object>\"",
-                    m.name
-                )));
-            }
-            let mut out = Measured::default();
-            for obj in &m.of {
-                // The edge strip chosen for this plate by the render stage (full-frame
-                // pixels → window pixels); without one, the strip of its label box.
-                let roi = match object_rects.get(obj) {
-                    Some(r) => {
-                        let w = si.window;
-                        let x0 = r.x.max(w.x);
-                        let y0 = r.y.max(w.y);
-                        let x1 = (r.x + r.w).min(w.x + w.w);
-                        let y1 = (r.y + r.h).min(w.y + w.h);
-                        if x1 <= x0 || y1 <= y0 {
-                            return Err(Error::invalid(format!(
-                                "object '{obj}' is outside the rendered window"
-                            )));
-                        }
-                        Rect::new(x0 - w.x, y0 - w.y, x1 - x0, y1 - y0)
-                    }
-                    None => edge_strip(
-                        label_box(&si.labels, &si.label_names, si.width(), si.height(), obj)
-                            .ok_or_else(|| {
-                                Error::invalid(format!(
-                                    "object '{obj}' is not in the measured image"
-                                ))
-                            })?,
-                    ),
-                };
-                let (sfr, roi) =
-                    crate::measure::sfr::sfr_of_region(&plane, roi, &opts).map_err(|e| {
-                        Error::invalid(format!("measurement '{}', edge '{obj}': {e}", m.name))
-                    })?;
-                let r = sfr.measured(&m.name, roi).prefixed(obj);
-                out.figures.extend(r.figures);
-                out.curves.extend(r.curves);
-                out.pixels_read.extend(r.pixels_read);
-            }
-            Ok(out)
-        }
-        "mcc" => {
-            let si = need_si()?;
-            let chart = m.of.first().map(String::as_str).unwrap_or("mcc");
-            let patches = crate::measure::mcc::patch_means_of_sensor(si, chart, 0.25)?;
-            Ok(crate::measure::mcc::measured(&patches, &m.name))
-        }
-        "profile" => {
-            let si = need_si()?;
-            crate::measure::profile::profile_of_sensor(
-                si,
-                &m.of,
-                &crate::measure::profile::ProfileOptions::default(),
-                &m.name,
-            )
-        }
-        "noise" => {
-            let si = need_si()?;
-            let plane = Plane::from_sensor(si)?;
-            let opts = crate::measure::noise::NoiseOptions {
-                conversion_gain_dv_per_e: si.conversion_gain_dv_per_e,
-                seed: spec.render.seed,
-                ..Default::default()
-            };
-            Ok(crate::measure::noise::measure(&plane, &opts, &m.name)?.0)
-        }
-        "ri" => {
-            let oi = oi.ok_or_else(|| {
-                Error::invalid(format!("measurement '{}' needs an optical image", m.name))
-            })?;
-            // band-integrated irradiance (W/m²) per pixel
-            let n = oi.bands();
-            let data: Vec<f64> = (0..oi.window.area() as usize)
-                .map(|i| {
-                    (0..n)
-                        .map(|b| oi.irradiance[i * n + b] as f64 * oi.grid.trapezoid_weight(b))
-                        .sum()
-                })
-                .collect();
-            let plane = Plane::new(oi.width() as usize, oi.height() as usize, data)?;
-            let opts = crate::measure::ri::RiOptions {
-                pixel_pitch_m: Some(oi.pixel_pitch_m),
-                center_px: Some((
-                    oi.full_width as f64 / 2.0 - oi.window.x as f64,
-                    oi.full_height as f64 / 2.0 - oi.window.y as f64,
-                )),
-                ..Default::default()
-            };
-            crate::measure::ri::relative_illumination(&plane, &opts, &m.name)
-        }
-        k => Err(Error::NotSupported(format!(
-            "measurement '{k}' inside an experiment run (use `camsim measure` on images)"
-        ))),
-    }
+    crate::measure::request::run(&m.name, &m.of, &opts, &inputs)
 }
 
-/// CIE 1931 chromaticity and luminance of a named spectrum, integrated on the
-/// measurement's grid (`wavelength-nm=`, default the render grid) with the
-/// shipped CMFs (trapezoid rule). Exact arithmetic on tabulated data: the
-/// standard error is 0. For a radiance in W/(sr·m²·nm) the luminance is
-/// reported in cd/m²; for any other unit the quantity is `Y` = ∫S·ȳ dλ in the
-/// spectrum's unit × nm, labelled "relative".
+/// CIE 1931 chromaticity and luminance of a named spectrum
+/// ([`crate::measure::colorimetry`]).
 pub fn colorimetry(m: &Measure, spec: &ResolvedExperiment) -> Result<Vec<Figure>> {
-    let reference = m
-        .params
-        .str("spectrum")
-        .map_err(Error::invalid)?
-        .ok_or_else(|| Error::invalid("colorimetry needs spectrum=\"…\""))?;
-    let dir = spec.file.parent().unwrap_or(std::path::Path::new("."));
-    let spd = crate::spectrum::library::resolve(reference, dir).map_err(Error::invalid)?;
-    let grid = match m.params.get("wavelength-nm") {
-        Some(v) => {
-            super::apply::as_grid(v, "wavelength-nm").map_err(|e| Error::invalid(e.message))?
+    let dir = spec.file.parent().unwrap_or(Path::new("."));
+    let o = match crate::measure::request::checked(&m.kind, &m.params, dir)
+        .map_err(|e| Error::invalid(format!("measurement '{}': {e}", m.name)))?
+    {
+        crate::measure::MeasureOptions::Colorimetry(o) => o,
+        other => {
+            return Err(Error::invalid(format!(
+                "measurement '{}' is a '{}', not a colorimetry",
+                m.name,
+                other.kind()
+            )));
         }
-        None => spec.render.wavelength.clone(),
     };
-    let (x, y) = crate::spectrum::chromaticity(&spd, &grid);
-    let mut out = vec![
-        Figure::new(&m.name, "x", "1", x, 0.0),
-        Figure::new(&m.name, "y", "1", y, 0.0),
-    ];
-    if spd.unit == "W/(sr·m²·nm)" {
-        out.push(Figure::new(
-            &m.name,
-            "luminance",
-            "cd/m2",
-            crate::spectrum::units::luminance(&spd, &grid),
-            0.0,
-        ));
-    } else {
-        let y_rel = crate::spectrum::units::luminance(&spd, &grid)
-            / crate::spectrum::units::LUMINOUS_EFFICACY_LM_PER_W;
-        out.push(Figure::new(&m.name, "Y", "relative", y_rel, 0.0));
-    }
-    Ok(out)
+    crate::measure::colorimetry::colorimetry(&m.name, &o, &spec.render.wavelength)
 }

@@ -9,7 +9,63 @@
 use super::stats::{mean, std_dev};
 use super::{Curve, Measured};
 use crate::figure::Figure;
+use crate::params::{Kind, ParamError, ParamSpec};
 use crate::{Error, Result};
+
+/// `measure "compare" of="<simulated>" reference="<measured>"`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CompareOptions {
+    /// The measurement compared against (required).
+    pub reference: Option<String>,
+    /// Keep only quantities containing this text.
+    pub quantity: Option<String>,
+    /// Divide each side by its mean over the pairs first (compare shapes).
+    pub normalize_mean: bool,
+}
+
+/// The properties of `measure "compare"`.
+pub static SCHEMA: crate::params::Schema = crate::params::Schema {
+    node: "measure \"compare\"",
+    params: &[
+        super::request::name_param(),
+        super::request::of_param(
+            "the (simulated) measurement whose figures are compared (required; one)",
+            "\"mcc-far\"",
+        ),
+        ParamSpec {
+            name: "reference",
+            kind: Kind::Text,
+            default: "",
+            doc: "the measurement compared against, e.g. one of a captured image (required); figures pair by quantity name and unit",
+            example: "\"mcc-measured\"",
+        },
+        ParamSpec {
+            name: "quantity",
+            kind: Kind::Text,
+            default: "all",
+            doc: "keep only quantities whose name contains this text (e.g. \"_mean\")",
+            example: "\"/g_mean\"",
+        },
+        ParamSpec {
+            name: "normalize",
+            kind: Kind::Choice(&["none", "mean"]),
+            default: "none",
+            doc: "\"mean\" divides each side by its mean over the pairs first (compares shapes, not exposure)",
+            example: "\"mean\"",
+        },
+    ],
+};
+
+/// Read `measure "compare"` (see [`SCHEMA`]).
+pub fn from_params(
+    d: &crate::params::ParamDict,
+) -> std::result::Result<CompareOptions, ParamError> {
+    Ok(CompareOptions {
+        reference: super::request::nonempty(d, "reference")?,
+        quantity: super::request::nonempty(d, "quantity")?,
+        normalize_mean: d.choice("normalize")? == Some("mean"),
+    })
+}
 
 /// One compared value: name (e.g. "patch04/g"), simulated, reference.
 #[derive(Clone, Debug, PartialEq)]

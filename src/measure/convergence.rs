@@ -10,7 +10,85 @@
 use super::stats::line_fit;
 use super::{Curve, Measured};
 use crate::figure::Figure;
+use crate::params::{Kind, ParamError, ParamSpec};
 use crate::{Error, Result};
+
+/// `measure "convergence" of="<measurement>" spp=(…)`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ConvergenceOptions {
+    /// Sample counts, strictly increasing, at least two (required).
+    pub spp: Vec<u64>,
+    /// A reference run's sample count (rendered with the variant's seed).
+    pub reference_spp: Option<u64>,
+    /// Follow only quantities whose name contains this text.
+    pub quantity: Option<String>,
+}
+
+/// The properties of `measure "convergence"`.
+pub static SCHEMA: crate::params::Schema = crate::params::Schema {
+    node: "measure \"convergence\"",
+    params: &[
+        super::request::name_param(),
+        super::request::of_param(
+            "the rendered measurement (sfr, mcc, profile, noise or ri) whose figures are followed (required; one)",
+            "\"sfr-near\"",
+        ),
+        ParamSpec {
+            name: "spp",
+            kind: Kind::Numbers,
+            default: "",
+            doc: "samples per pixel of the runs, at least two, strictly increasing (required); run k uses seed render.seed + 1 + k",
+            example: "(8 32)",
+        },
+        ParamSpec {
+            name: "reference-spp",
+            kind: Kind::Integer,
+            default: "none",
+            doc: "samples per pixel of a reference run (the variant's seed); adds each figure's error against it",
+            example: "512",
+        },
+        ParamSpec {
+            name: "quantity",
+            kind: Kind::Text,
+            default: "all",
+            doc: "follow only quantities whose name contains this text (e.g. \"mtf50\")",
+            example: "\"mtf50\"",
+        },
+    ],
+};
+
+/// Read `measure "convergence"` (see [`SCHEMA`]).
+pub fn from_params(
+    d: &crate::params::ParamDict,
+) -> std::result::Result<ConvergenceOptions, ParamError> {
+    let help = "e.g. spp=(16 64 256): at least two increasing sample counts";
+    let spp = match d.f64s("spp")? {
+        None => vec![],
+        Some(v) => {
+            if v.iter().any(|x| x.fract() != 0.0 || *x < 1.0 || *x > 1e9) {
+                return Err(ParamError::value(
+                    "spp",
+                    "'spp': expected whole sample counts 1 … 1000000000",
+                )
+                .with_help(help));
+            }
+            let s: Vec<u64> = v.iter().map(|x| *x as u64).collect();
+            if s.len() < 2 || s.windows(2).any(|w| w[1] <= w[0]) {
+                return Err(ParamError::value(
+                    "spp",
+                    "'spp': expected at least two strictly increasing sample counts",
+                )
+                .with_help(help));
+            }
+            s
+        }
+    };
+    Ok(ConvergenceOptions {
+        spp,
+        reference_spp: d.int("reference-spp", 1, 1_000_000_000)?,
+        quantity: super::request::nonempty(d, "quantity")?,
+    })
+}
 
 /// One run of the same figure at some sample count.
 #[derive(Clone, Debug, PartialEq)]

@@ -22,6 +22,7 @@ use super::stats::{mean, std_dev};
 use super::{Curve, Measured};
 use crate::figure::Figure;
 use crate::optical_image::Rect;
+use crate::params::{Kind, ParamError, ParamSpec};
 use crate::{Error, Result};
 
 #[derive(Clone, Debug)]
@@ -73,6 +74,60 @@ pub fn patch_labels(label_names: &[String], chart: &str) -> Result<Vec<(usize, u
     }
     v.sort();
     Ok(v)
+}
+
+/// `measure "mcc"`: how much of each patch's border is left out.
+#[derive(Clone, Debug)]
+pub struct MccRequest {
+    /// Fraction of each patch's size eroded from every side (0 < x < 0.5;
+    /// at least 1 pixel).
+    pub inset_fraction: f64,
+    pub input: Option<String>,
+}
+
+impl Default for MccRequest {
+    fn default() -> Self {
+        Self {
+            inset_fraction: 0.25,
+            input: None,
+        }
+    }
+}
+
+/// The properties of `measure "mcc"`.
+pub static SCHEMA: crate::params::Schema = crate::params::Schema {
+    node: "measure \"mcc\"",
+    params: &[
+        super::request::name_param(),
+        super::request::of_param(
+            "the chart object whose patches (`<chart>/patch-1` … `-24`) are read; default \"mcc\"",
+            "\"chart-far\"",
+        ),
+        super::request::input_param(),
+        ParamSpec {
+            name: "inset-fraction",
+            kind: Kind::Number,
+            default: "0.25",
+            doc: "fraction of each patch's size left out along every side before averaging (0 < x < 0.5; at least 1 pixel), keeping blur and edges out of the means",
+            example: "0.1",
+        },
+    ],
+};
+
+/// Read `measure "mcc"` (see [`SCHEMA`]).
+pub fn from_params(d: &crate::params::ParamDict) -> std::result::Result<MccRequest, ParamError> {
+    let mut r = MccRequest::default();
+    if let Some(x) = d.f64("inset-fraction")? {
+        if !(x > 0.0 && x < 0.5) {
+            return Err(ParamError::value(
+                "inset-fraction",
+                format!("'inset-fraction' = {x} is out of range; expected 0 < x < 0.5"),
+            ));
+        }
+        r.inset_fraction = x;
+    }
+    r.input = super::request::nonempty(d, "input")?;
+    Ok(r)
 }
 
 /// Means of every patch of `chart`.

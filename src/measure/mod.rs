@@ -1,5 +1,7 @@
 //! Measurements, one module each: slanted-edge SFR, relative illumination,
-//! uniform-region noise, line profiles, MCC patch means, comparisons.
+//! uniform-region noise, line profiles, MCC patch means, comparisons,
+//! colorimetry. [`request`] reads a `measure` node's options (each kind's
+//! `SCHEMA` lives beside it) and runs it on a variant's images.
 //! Reports: HTML (minijinja + plotters SVG) and diff across results.
 //!
 //! Every measurement takes a [`plane::Plane`] (one value per pixel, optionally
@@ -7,6 +9,7 @@
 //! and returns [`crate::figure::Figure`]s (value, standard error, unit), the
 //! curves it computed ([`Curve`]) and the pixel rectangles it read.
 
+pub mod colorimetry;
 pub mod compare;
 pub mod convergence;
 pub mod io;
@@ -14,9 +17,12 @@ pub mod mcc;
 pub mod noise;
 pub mod plane;
 pub mod profile;
+pub mod request;
 pub mod ri;
 pub mod sfr;
 pub mod stats;
+
+pub use request::{MeasureOptions, options};
 
 use serde::{Deserialize, Serialize};
 

@@ -28,6 +28,7 @@ use super::stats::{SplitMix64, least_squares, line_fit, mean, median, std_dev};
 use super::{Curve, Measured};
 use crate::figure::Figure;
 use crate::optical_image::Rect;
+use crate::params::{Kind, ParamError, ParamSpec};
 use crate::{Error, Result};
 
 #[derive(Clone, Debug)]
@@ -59,6 +60,140 @@ impl Default for NoiseOptions {
             channel: "g".into(),
         }
     }
+}
+
+/// `measure "noise"`: the region test's options and what the image supplies
+/// unless written (the seed, the conversion gain).
+#[derive(Clone, Debug, Default)]
+pub struct NoiseRequest {
+    /// Region size/count, thresholds and channel (`seed` and the conversion
+    /// gain in here are replaced by the fields below or the image's).
+    pub options: NoiseOptions,
+    /// `seed`: None = the variant's render seed.
+    pub seed: Option<u64>,
+    /// `conversion-gain-dv-e`: None = the sensor's (required on a capture).
+    pub conversion_gain_dv_per_e: Option<f64>,
+    /// `roi-px`: the part of the image regions are drawn from.
+    pub roi_px: Option<Rect>,
+    pub input: Option<String>,
+}
+
+/// The properties of `measure "noise"`.
+pub static SCHEMA: crate::params::Schema = crate::params::Schema {
+    node: "measure \"noise\"",
+    params: &[
+        super::request::name_param(),
+        super::request::input_param(),
+        ParamSpec {
+            name: "channel",
+            kind: Kind::Choice(&["r", "g", "b"]),
+            default: "g",
+            doc: "CFA channel whose pixels each region tests (ignored on a single-channel image)",
+            example: "\"b\"",
+        },
+        ParamSpec {
+            name: "roi-px",
+            kind: Kind::Numbers,
+            default: "",
+            doc: "part (x y w h) of the image the regions are drawn from, full-frame sensor pixels (of a captured image: its pixels); default the whole image",
+            example: "(2 4 60 50)",
+        },
+        ParamSpec {
+            name: "region-px",
+            kind: Kind::Integer,
+            default: "10",
+            doc: "side of each square region, pixels (4 … 4096; the paper's 10×10)",
+            example: "12",
+        },
+        ParamSpec {
+            name: "region-count",
+            kind: Kind::Integer,
+            default: "500",
+            doc: "regions drawn at random (1 … 1000000)",
+            example: "300",
+        },
+        ParamSpec {
+            name: "seed",
+            kind: Kind::Integer,
+            default: "the render seed",
+            doc: "seed of the region positions and cross-validation folds",
+            example: "77",
+        },
+        ParamSpec {
+            name: "conversion-gain-dv-e",
+            kind: Kind::Number,
+            default: "the sensor's",
+            doc: "conversion gain, DV per electron, of the Poisson outlier test (> 0; required on a captured image)",
+            example: "0.37",
+        },
+        ParamSpec {
+            name: "read-noise-e",
+            kind: Kind::Number,
+            default: "0",
+            doc: "read noise, electrons rms, added in quadrature to the Poisson σ of the outlier test (≥ 0)",
+            example: "2.5",
+        },
+        ParamSpec {
+            name: "outlier-sigma",
+            kind: Kind::Number,
+            default: "3",
+            doc: "a region with a pixel farther than this many σ from its median is rejected (> 0)",
+            example: "4",
+        },
+        ParamSpec {
+            name: "nonuniform-ratio",
+            kind: Kind::Number,
+            default: "1.02",
+            doc: "a region is non-uniform when the held-out RMSE of a constant exceeds this times that of the quadratic surface (≥ 1)",
+            example: "1.05",
+        },
+        ParamSpec {
+            name: "fold-count",
+            kind: Kind::Integer,
+            default: "5",
+            doc: "cross-validation folds of the uniformity test (2 … 20)",
+            example: "4",
+        },
+    ],
+};
+
+/// Read `measure "noise"` (see [`SCHEMA`]).
+pub fn from_params(d: &crate::params::ParamDict) -> std::result::Result<NoiseRequest, ParamError> {
+    let mut o = NoiseOptions::default();
+    if let Some(c) = d.choice("channel")? {
+        o.channel = c.to_string();
+    }
+    if let Some(k) = d.int("region-px", 4, 4096)? {
+        o.region_px = k as usize;
+    }
+    if let Some(k) = d.int("region-count", 1, 1_000_000)? {
+        o.regions = k as usize;
+    }
+    if let Some(x) = d.nonneg("read-noise-e")? {
+        o.read_noise_e = x;
+    }
+    if let Some(x) = d.positive("outlier-sigma")? {
+        o.outlier_sigma = x;
+    }
+    if let Some(x) = d.f64("nonuniform-ratio")? {
+        if x < 1.0 {
+            return Err(ParamError::value(
+                "nonuniform-ratio",
+                format!("'nonuniform-ratio' = {x} is out of range; expected ≥ 1"),
+            ));
+        }
+        o.nonuniform_ratio = x;
+    }
+    if let Some(k) = d.int("fold-count", 2, 20)? {
+        o.folds = k as usize;
+    }
+    Ok(NoiseRequest {
+        options: o,
+        seed: d.int("seed", 0, 1 << 53)?,
+        conversion_gain_dv_per_e: d.positive("conversion-gain-dv-e")?,
+        roi_px: super::request::roi_px(d, "roi-px")?,
+        input: super::request::nonempty(d, "input")?,
+    })
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

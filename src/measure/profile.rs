@@ -14,6 +14,7 @@ use super::stats::{mean, std_dev};
 use super::{Curve, Measured};
 use crate::figure::Figure;
 use crate::optical_image::Rect;
+use crate::params::{Kind, ParamError, ParamSpec};
 use crate::{Error, Result};
 
 #[derive(Clone, Debug)]
@@ -24,6 +25,8 @@ pub struct ProfileOptions {
     pub ratios: Vec<(String, String)>,
     /// Samples grouped along the line, px (2 for a Bayer mosaic, 1 otherwise).
     pub step_px: usize,
+    /// Channels profiled (empty = every channel of the image).
+    pub channels: Vec<String>,
 }
 
 impl Default for ProfileOptions {
@@ -33,8 +36,105 @@ impl Default for ProfileOptions {
             vertical: false,
             ratios: vec![("g".into(), "r".into())],
             step_px: 2,
+            channels: vec![],
         }
     }
+}
+
+/// `measure "profile"`: the line and what is reported along it.
+#[derive(Clone, Debug, Default)]
+pub struct ProfileRequest {
+    /// `step_px` is set from the image (its CFA tile width).
+    pub options: ProfileOptions,
+    pub input: Option<String>,
+}
+
+/// The properties of `measure "profile"`.
+pub static SCHEMA: crate::params::Schema = crate::params::Schema {
+    node: "measure \"profile\"",
+    params: &[
+        super::request::name_param(),
+        super::request::of_param(
+            "the object(s) the line runs through (more as arguments); the line crosses the centroid of their pixels and spans their bounding box",
+            "\"mcc/patch-19\"",
+        ),
+        super::request::input_param(),
+        ParamSpec {
+            name: "band-px",
+            kind: Kind::Integer,
+            default: "4",
+            doc: "thickness of the line, pixels (1 … 10000; rounded up to whole CFA tiles)",
+            example: "6",
+        },
+        ParamSpec {
+            name: "vertical",
+            kind: Kind::Bool,
+            default: "#false",
+            doc: "run the line down a column instead of along a row",
+            example: "#true",
+        },
+        ParamSpec {
+            name: "channels",
+            kind: Kind::Text,
+            default: "all",
+            doc: "the channels profiled, space-separated (e.g. \"r g\"); each must be in the image",
+            example: "\"g b\"",
+        },
+        ParamSpec {
+            name: "ratios",
+            kind: Kind::Text,
+            default: "g/r",
+            doc: "channel ratios reported, space-separated numerator/denominator pairs (\"\" = none), e.g. the paper's G/R of Fig. 9",
+            example: "\"b/g r/g\"",
+        },
+    ],
+};
+
+/// Read `measure "profile"` (see [`SCHEMA`]).
+pub fn from_params(
+    d: &crate::params::ParamDict,
+) -> std::result::Result<ProfileRequest, ParamError> {
+    let mut o = ProfileOptions::default();
+    if let Some(k) = d.int("band-px", 1, 10_000)? {
+        o.band_px = k as usize;
+    }
+    if let Some(v) = d.bool("vertical")? {
+        o.vertical = v;
+    }
+    let name_ok = |n: &str| !n.is_empty() && n.chars().all(|c| c.is_ascii_alphanumeric());
+    if let Some(s) = d.str("channels")? {
+        let v: Vec<String> = s.split_whitespace().map(str::to_string).collect();
+        if v.is_empty() || !v.iter().all(|c| name_ok(c)) {
+            return Err(ParamError::value(
+                "channels",
+                format!(
+                    "'channels' = \"{s}\": expected channel names separated by spaces, e.g. \"r g b\""
+                ),
+            ));
+        }
+        o.channels = v;
+    }
+    if let Some(s) = d.str("ratios")? {
+        let mut v = vec![];
+        for p in s.split_whitespace() {
+            match p.split_once('/') {
+                Some((a, b)) if name_ok(a) && name_ok(b) => v.push((a.to_string(), b.to_string())),
+                _ => {
+                    return Err(ParamError::value(
+                        "ratios",
+                        format!(
+                            "'ratios': '{p}' is not a ratio; expected numerator/denominator pairs such as \"g/r b/g\""
+                        ),
+                    ));
+                }
+            }
+        }
+        o.ratios = v;
+    }
+    Ok(ProfileRequest {
+        options: o,
+        input: super::request::nonempty(d, "input")?,
+    })
 }
 
 /// Profiles through `objects` of a sensor image (black level subtracted, DV;
@@ -68,6 +168,24 @@ pub fn profile(
     opts: &ProfileOptions,
     measurement: &str,
 ) -> Result<Measured> {
+    let selected: Vec<ChannelView>;
+    let views = if opts.channels.is_empty() {
+        views
+    } else {
+        selected = opts
+            .channels
+            .iter()
+            .map(|c| {
+                views.iter().find(|v| v.name == c).copied().ok_or_else(|| {
+                    Error::invalid(format!(
+                        "profile: no channel '{c}' in the image (has {})",
+                        views.iter().map(|v| v.name).collect::<Vec<_>>().join(", ")
+                    ))
+                })
+            })
+            .collect::<Result<_>>()?;
+        &selected
+    };
     let plane = views
         .first()
         .ok_or_else(|| Error::invalid("profile: no channels"))?

@@ -13,6 +13,7 @@ use super::stats::{mean, std_dev};
 use super::{Curve, Measured};
 use crate::figure::Figure;
 use crate::optical_image::Rect;
+use crate::params::{Kind, ParamError, ParamSpec};
 use crate::{Error, Result};
 
 #[derive(Clone, Debug)]
@@ -48,6 +49,68 @@ impl RiOptions {
             ..Default::default()
         }
     }
+}
+
+/// `measure "ri"`: annuli, centre and (on a captured image) the channel.
+#[derive(Clone, Debug)]
+pub struct RiRequest {
+    pub bins: usize,
+    /// `channel`: None = "g" on a captured mosaic; refused on the optical image.
+    pub channel: Option<String>,
+    /// `center-px`: the optical centre in full-frame pixels (captured image:
+    /// its pixels); None = the full-frame centre.
+    pub center_px: Option<(f64, f64)>,
+    pub input: Option<String>,
+}
+
+/// The properties of `measure "ri"`.
+pub static SCHEMA: crate::params::Schema = crate::params::Schema {
+    node: "measure \"ri\"",
+    params: &[
+        super::request::name_param(),
+        super::request::input_param(),
+        ParamSpec {
+            name: "bin-count",
+            kind: Kind::Integer,
+            default: "20",
+            doc: "equal-width annuli from the centre to the farthest pixel (1 … 10000)",
+            example: "12",
+        },
+        ParamSpec {
+            name: "center-px",
+            kind: Kind::Numbers,
+            default: "the full-frame centre",
+            doc: "optical centre (x y), full-frame pixels (of a captured image: its pixels); pixel i spans [i, i+1]",
+            example: "(30.5 20)",
+        },
+        ParamSpec {
+            name: "channel",
+            kind: Kind::Choice(&["r", "g", "b"]),
+            default: "g",
+            doc: "CFA channel read on a captured image (input=); the optical image is band-integrated irradiance and takes none",
+            example: "\"r\"",
+        },
+    ],
+};
+
+/// Read `measure "ri"` (see [`SCHEMA`]).
+pub fn from_params(d: &crate::params::ParamDict) -> std::result::Result<RiRequest, ParamError> {
+    let center_px = match d.f64s("center-px")? {
+        None => None,
+        Some(v) if v.len() == 2 => Some((v[0], v[1])),
+        Some(v) => {
+            return Err(ParamError::value(
+                "center-px",
+                format!("'center-px': expected 2 numbers (x y), found {}", v.len()),
+            ));
+        }
+    };
+    Ok(RiRequest {
+        bins: d.int("bin-count", 1, 10_000)?.map_or(20, |k| k as usize),
+        channel: d.choice("channel")?.map(str::to_string),
+        center_px,
+        input: super::request::nonempty(d, "input")?,
+    })
 }
 
 /// RI curve (field height in mm when the pitch is known, else px) and figures

@@ -59,6 +59,7 @@ use super::stats::{jackknife_se, least_squares, median};
 use super::{Curve, Measured};
 use crate::figure::Figure;
 use crate::optical_image::Rect;
+use crate::params::{Kind, ParamError, ParamSpec};
 use crate::{Error, Result};
 
 /// Largest RMS MTF that pixel noise alone may produce at 0.5 cy/px before an
@@ -102,6 +103,9 @@ pub struct SfrOptions {
     pub jackknife_groups: usize,
     /// Highest frequency reported, cy/px (the 4× ESF supports up to 2).
     pub max_freq_cy_per_px: f64,
+    /// Largest RMS MTF that pixel noise alone may produce at 0.5 cy/px before
+    /// the region is refused (default [`MAX_NOISE_FLOOR`]).
+    pub max_noise_floor: f64,
 }
 
 impl Default for SfrOptions {
@@ -112,6 +116,7 @@ impl Default for SfrOptions {
             pixel_pitch_m: None,
             jackknife_groups: 8,
             max_freq_cy_per_px: 1.0,
+            max_noise_floor: MAX_NOISE_FLOOR,
         }
     }
 }
@@ -756,13 +761,14 @@ pub fn sfr(plane: &Plane, opts: &SfrOptions) -> Result<Sfr> {
     let f_check = 0.5f64.min(fmax);
     let i_check = ((f_check * nbins as f64 / 4.0).round() as usize).min(full.noise_floor.len() - 1);
     let floor_check = full.noise_floor[i_check];
-    if floor_check > MAX_NOISE_FLOOR {
+    if floor_check > opts.max_noise_floor {
         return Err(Error::invalid(format!(
-            "edge contrast {:.4} is too low for its noise ({:.4} rms per pixel, contrast/noise {:.1}): noise alone gives MTF ≈ {:.3} at {f_check} cy/px (limit {MAX_NOISE_FLOOR}); render more samples per pixel, expose longer or use a taller region",
+            "edge contrast {:.4} is too low for its noise ({:.4} rms per pixel, contrast/noise {:.1}): noise alone gives MTF ≈ {:.3} at {f_check} cy/px (limit {}); render more samples per pixel, expose longer or use a taller region",
             full.contrast,
             full.pixel_noise,
             full.contrast / full.pixel_noise.max(f64::MIN_POSITIVE),
-            floor_check
+            floor_check,
+            opts.max_noise_floor
         )));
     }
     // Jackknife over contiguous row blocks.
@@ -922,6 +928,193 @@ pub fn object_roi(
     Err(Error::invalid(format!(
         "object '{object}' has no solid interior of at least 8×8 px for an SFR region"
     )))
+}
+
+/// `measure "sfr"`: the slanted-edge options, the region and the input.
+#[derive(Clone, Debug, Default)]
+pub struct SfrRequest {
+    pub options: SfrOptions,
+    /// `roi-px`: the region holding the edge (full-frame pixels of the
+    /// sensor, or pixels of a captured image); None = each `of` object's strip.
+    pub roi_px: Option<Rect>,
+    /// `input`: the captured image read instead of the sensor image.
+    pub input: Option<String>,
+}
+
+/// The properties of `measure "sfr"`.
+pub static SCHEMA: crate::params::Schema = crate::params::Schema {
+    node: "measure \"sfr\"",
+    params: &[
+        super::request::name_param(),
+        super::request::of_param(
+            "the slanted-edge object whose edge is measured (more as arguments: `\"edge-near\" \"edge-far\"`); figures are prefixed `<object>/` (`roi/` with roi-px alone, the input's name on a capture)",
+            "\"edge-far\"",
+        ),
+        super::request::input_param(),
+        ParamSpec {
+            name: "channel",
+            kind: Kind::Choice(&["lum", "r", "g", "b"]),
+            default: "lum",
+            doc: "pixels forming the edge-spread function: \"lum\" = all of them (each CFA channel normalised to its own plateaus), or one CFA channel",
+            example: "\"g\"",
+        },
+        ParamSpec {
+            name: "roi-px",
+            kind: Kind::Numbers,
+            default: "",
+            doc: "region (x y w h) holding the edge, in full-frame sensor pixels (of a captured image: its pixels); default: the central strip of each `of` object",
+            example: "(4 6 40 48)",
+        },
+        ParamSpec {
+            name: "fit-degree",
+            kind: Kind::Integer,
+            default: "1",
+            doc: "degree of the polynomial x_e(y) fitted through the row centroids: 1 (straight edge) … 5",
+            example: "2",
+        },
+        ParamSpec {
+            name: "jackknife-count",
+            kind: Kind::Integer,
+            default: "8",
+            doc: "row blocks of the delete-a-group jackknife giving the standard errors, 4 … 64 (at most half the rows used)",
+            example: "12",
+        },
+        ParamSpec {
+            name: "max-freq-cy-px",
+            kind: Kind::Number,
+            default: "1",
+            doc: "highest frequency of the MTF curve, cycles/pixel (0 < f ≤ 2; the 4× oversampled ESF is fixed by ISO 12233)",
+            example: "1.5",
+        },
+        ParamSpec {
+            name: "max-noise-fraction",
+            kind: Kind::Number,
+            default: "0.5",
+            doc: "largest RMS MTF that pixel noise alone may give at 0.5 cy/px (0 < x ≤ 1); a region whose edge contrast is too low for its noise is refused, not reported as MTF",
+            example: "0.3",
+        },
+    ],
+};
+
+/// Read `measure "sfr"` (see [`SCHEMA`]).
+pub fn from_params(d: &crate::params::ParamDict) -> std::result::Result<SfrRequest, ParamError> {
+    let mut o = SfrOptions::default();
+    if let Some(c) = d.choice("channel")? {
+        o.channel =
+            SfrChannel::parse(c).map_err(|e| ParamError::value("channel", e.to_string()))?;
+    }
+    if let Some(k) = d.int("fit-degree", 1, 5)? {
+        o.fit_degree = k as usize;
+    }
+    if let Some(k) = d.int("jackknife-count", 4, 64)? {
+        o.jackknife_groups = k as usize;
+    }
+    if let Some(f) = d.positive("max-freq-cy-px")? {
+        if f > 2.0 {
+            return Err(ParamError::value(
+                "max-freq-cy-px",
+                format!(
+                    "'max-freq-cy-px' = {f} is out of range; expected 0 < f ≤ 2 (the 4× ESF reaches 2 cy/px)"
+                ),
+            ));
+        }
+        o.max_freq_cy_per_px = f;
+    }
+    if let Some(x) = d.positive("max-noise-fraction")? {
+        if x > 1.0 {
+            return Err(ParamError::value(
+                "max-noise-fraction",
+                format!("'max-noise-fraction' = {x} is out of range; expected 0 < x ≤ 1"),
+            ));
+        }
+        o.max_noise_floor = x;
+    }
+    Ok(SfrRequest {
+        options: o,
+        roi_px: super::request::roi_px(d, "roi-px")?,
+        input: super::request::nonempty(d, "input")?,
+    })
+}
+
+/// The part of a slanted-edge plate's box that the SFR reads: the central half
+/// of its width (both plateaus and the edge) and at most 128 rows about its
+/// centre (≥ 11 rows make one phase cycle at 5°).
+pub fn edge_strip(b: Rect) -> Rect {
+    let h = (b.h / 2).clamp(8.min(b.h), 128);
+    Rect::new(
+        b.x + b.w / 4,
+        b.y + (b.h - h) / 2,
+        (b.w / 2).max(8.min(b.w)),
+        h,
+    )
+}
+
+/// `measure "sfr"` on a simulated sensor image: per `of` object, the strip the
+/// render stage chose for it (else the strip of its label box), or `roi-px`.
+pub fn run_on_sensor(
+    name: &str,
+    of: &[String],
+    r: &SfrRequest,
+    si: &crate::image::SensorImage,
+    inp: &super::request::Inputs,
+) -> Result<Measured> {
+    let plane = Plane::from_sensor(si)?;
+    let opts = SfrOptions {
+        pixel_pitch_m: Some(si.pixel_pitch_m),
+        ..r.options.clone()
+    };
+    let mut regions = vec![];
+    if let Some(roi) = r.roi_px {
+        if of.len() > 1 {
+            return Err(Error::invalid(format!(
+                "measurement '{name}': roi-px names one region but of= names {} objects",
+                of.len()
+            )));
+        }
+        let label = of.first().map(String::as_str).unwrap_or("roi");
+        regions.push((
+            label.to_string(),
+            super::request::to_window(roi, si.window, "roi-px")?,
+        ));
+    } else {
+        if of.is_empty() {
+            return Err(Error::invalid(format!(
+                "measurement '{name}': sfr needs of=\"<edge object>\" or roi-px=(x y w h)"
+            )));
+        }
+        for obj in of {
+            // The edge strip chosen for this plate by the render stage (full-frame
+            // pixels → window pixels); without one, the strip of its label box.
+            let roi = match inp.object_rects.get(obj) {
+                Some(rect) => {
+                    super::request::to_window(*rect, si.window, &format!("object '{obj}'"))?
+                }
+                None => edge_strip(
+                    super::request::label_box(
+                        &si.labels,
+                        &si.label_names,
+                        si.width(),
+                        si.height(),
+                        obj,
+                    )
+                    .ok_or_else(|| {
+                        Error::invalid(format!("object '{obj}' is not in the measured image"))
+                    })?,
+                ),
+            };
+            regions.push((obj.clone(), roi));
+        }
+    }
+    let mut out = Measured::default();
+    for (obj, roi) in regions {
+        let (sfr, roi) = sfr_of_region(&plane, roi, &opts)
+            .map_err(|e| Error::invalid(format!("measurement '{name}', edge '{obj}': {e}")))?;
+        let m = sfr.measured(name, roi).prefixed(&obj);
+        out.figures.extend(m.figures);
+        out.curves.extend(m.curves);
+        out.pixels_read.extend(m.pixels_read);
+    }
+    Ok(out)
 }
 
 #[cfg(test)]
