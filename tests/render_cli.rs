@@ -98,8 +98,16 @@ fn lamp_pixels_show_the_lamp_radiance(
         .radiance
         .clone();
     let film = sc.film.clone().expect("film");
-    let cam =
-        camsim::optics::pinhole::camera_from_spec(sc.camera.as_ref().unwrap(), &film).unwrap();
+    // The pinhole weight in closed form (not through the camera code): film
+    // distance d with the shorter film side spanning the field of view, and
+    // w = π/(4N²)·cos⁴θ.
+    let camsim::scene::CameraModel::Pinhole { fov_deg, f_number } =
+        sc.camera.as_ref().unwrap().model
+    else {
+        panic!("{scene}: expected a pinhole camera")
+    };
+    let short = film.width_px.min(film.height_px) as f64 * film.pixel_pitch_m;
+    let d = 0.5 * short / (0.5 * fov_deg.to_radians()).tan();
     let img = exr::prelude::read_first_flat_layer_from_file(out).unwrap();
     assert_eq!(
         (img.layer_data.size.0, img.layer_data.size.1),
@@ -111,7 +119,10 @@ fn lamp_pixels_show_the_lamp_radiance(
             (film.height_px as f64 / 2.0 - y) * film.pixel_pitch_m,
         )
     };
-    let w_at = |f: DVec2| cam.sample_ray(f, DVec2::splat(0.5), 550.0).unwrap().weight;
+    let w_at = |f: DVec2| {
+        let c = d / (f.length_squared() + d * d).sqrt();
+        std::f64::consts::PI / (4.0 * f_number * f_number) * c.powi(4)
+    };
     let mut bands = 0;
     let mut worst = 0.0f64;
     for ch in &img.layer_data.channel_data.list {
