@@ -255,11 +255,100 @@ fn measure_mcc_profile_noise_ri_on_a_dng_with_a_label_map() {
     ]);
     assert_eq!(code, 0, "{err}");
     assert_eq!(out.lines().filter(|l| !l.starts_with('#')).count(), 51);
-    assert!(out.contains("# regions_accepted="), "{out}");
+    assert!(out.starts_with("x,y,w,h,verdict,mean_dv,std_dv\n"), "{out}");
+    // The chart is noise-free: a region whose green pixels all hold one value
+    // must be accepted with that mean (above black) and std 0 exactly; a region
+    // straddling a patch edge mixes values ≥ 18 DV apart, beyond 3 Poisson σ
+    // (≤ 1.9 DV at these levels, K = 0.17), and must be rejected.
+    let mut accepted = 0;
+    for l in out.lines().skip(1).filter(|l| !l.starts_with('#')) {
+        let f: Vec<&str> = l.split(',').collect();
+        let [x, y, rw, rh]: [usize; 4] = std::array::from_fn(|i| f[i].parse().unwrap());
+        let mut vals = vec![];
+        for yy in y..y + rh {
+            for xx in x..x + rw {
+                if cfa.channel_at(xx as u32, yy as u32) == 1 {
+                    vals.push(dv[yy * w + xx] as f64 - 64.0);
+                }
+            }
+        }
+        let uniform = vals.iter().all(|&v| v == vals[0]);
+        let (mean, std): (f64, f64) = (f[5].parse().unwrap(), f[6].parse().unwrap());
+        if uniform {
+            accepted += 1;
+            assert_eq!(f[4], "Accepted", "{l}");
+            assert!(
+                (mean - vals[0]).abs() < 1e-4 && std == 0.0,
+                "{l}: want {}",
+                vals[0]
+            );
+        } else {
+            assert_ne!(f[4], "Accepted", "{l}: mixes {vals:?}");
+        }
+    }
+    assert!(accepted >= 5, "only {accepted} uniform regions drawn");
+    assert!(
+        out.contains(&format!("# noise/regions_accepted={accepted} ± "))
+            || out.contains(&format!("# regions_accepted={accepted} ± ")),
+        "{out}"
+    );
 
     let (code, out, err) = camsim(&["measure", "ri", img, "--pixel-um", "1.4", "--bins", "5"]);
     assert_eq!(code, 0, "{err}");
     assert!(out.starts_with("field_height_mm,ri,stderr\n"), "{out}");
+    // RI as documented (measure/ri.rs): green pixels binned by the distance of
+    // their centres from the image centre into 5 equal annuli up to the corner
+    // pixel; RI = annulus mean / centre-annulus mean; stderr = the annulus
+    // means' standard errors (std/√n) propagated through the ratio. Computed
+    // here from the chart's known values.
+    let (cx, cy) = (w as f64 / 2.0, h as f64 / 2.0);
+    let r_of = |x: usize, y: usize| (x as f64 + 0.5 - cx).hypot(y as f64 + 0.5 - cy);
+    let r_max = r_of(0, 0) * (1.0 + 1e-9);
+    let mut bins = vec![vec![]; 5];
+    for y in 0..h {
+        for x in 0..w {
+            if cfa.channel_at(x as u32, y as u32) == 1 {
+                let b = ((r_of(x, y) / r_max * 5.0) as usize).min(4);
+                bins[b].push(dv[y * w + x] as f64 - 64.0);
+            }
+        }
+    }
+    let ms = |v: &Vec<f64>| {
+        let m = v.iter().sum::<f64>() / v.len() as f64;
+        let var = v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() - 1) as f64;
+        (m, var.sqrt() / (v.len() as f64).sqrt() / m)
+    };
+    let (m0, se0) = ms(&bins[0]);
+    let rows: Vec<Vec<f64>> = out
+        .lines()
+        .skip(1)
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len(), 5, "{out}");
+    for (i, row) in rows.iter().enumerate() {
+        let (m, rel) = ms(&bins[i]);
+        let ri = m / m0;
+        let se = if i == 0 {
+            ri * se0
+        } else {
+            ri * (rel * rel + se0 * se0).sqrt()
+        };
+        let fh = (i as f64 + 0.5) / 5.0 * r_max * 1.4e-3;
+        // Printed with 6 decimals: 1e-6 absolute; the stderr within 1 %
+        // (n vs n − 1 in the standard deviation: < 0.2 % with ≥ 300 pixels).
+        assert!(
+            (row[0] - fh).abs() < 1e-6,
+            "bin {i}: field height {} vs {fh}",
+            row[0]
+        );
+        assert!((row[1] - ri).abs() < 1e-6, "bin {i}: RI {} vs {ri}", row[1]);
+        assert!(
+            (row[2] - se).abs() < 0.01 * se + 1e-6,
+            "bin {i}: stderr {} vs {se}",
+            row[2]
+        );
+    }
 
     // A label map of the wrong size is an error naming it.
     let small = dir.path().join("small.png");

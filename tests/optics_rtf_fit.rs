@@ -305,8 +305,14 @@ fn evaluate(case: &Case, rows: &mut Vec<Row>) {
     }
 }
 
-#[test]
-fn optics_fitted_rtfs_match_prescriptions_and_zemax() {
+/// The per-model table of both lenses, computed once (≈ 80 s on 2 cores) and
+/// shared by the tests below; written to `target/optics-report.csv`.
+fn rows() -> &'static Vec<Row> {
+    static ROWS: std::sync::OnceLock<Vec<Row>> = std::sync::OnceLock::new();
+    ROWS.get_or_init(compute_rows)
+}
+
+fn compute_rows() -> Vec<Row> {
     let cases = [
         Case {
             name: "dgauss28deg",
@@ -353,16 +359,19 @@ fn optics_fitted_rtfs_match_prescriptions_and_zemax() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("target");
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::write(dir.join("optics-report.csv"), &csv).unwrap();
-    // Acceptance, default fit (film-point bundles on four focus planes,
-    // aberration-relative weights, area-matched ellipses): RI within 0.01 at
-    // every degree 3–7; ESF ≤ 1 % at degrees 4–7 (measured double Gauss
-    // 0.43/0.36/0.31/0.31 %, Tessar 0.40/0.15/0.04/0.03 %).
-    // Degree 3 (1.8 % / 2.5 %) is held to 3 % so a regression shows: a
-    // degree-3 polynomial cannot be accurate on axis and over a 28°/42° field
-    // at once (its off-axis ESFs are 1–9 % whatever the weighting); the
-    // axis-weighted degree-3 fits below meet the line on axis and pay for it
-    // off axis (fit.rs docs).
-    let esf_limit = |_lens: &str, d: usize| if d >= 4 { 0.01 } else { 0.03 };
+    rows
+}
+
+/// Acceptance against an independent reference, the traced prescription:
+/// the default fit (film-point bundles on four focus planes,
+/// aberration-relative weights, area-matched ellipses) keeps RI within 0.01
+/// at every degree 3–7 and the on-axis ESF within 1 % at degrees 4–7
+/// (measured double Gauss 0.43/0.36/0.31/0.31 %, Tessar 0.40/0.15/0.04/0.03
+/// %); the on-axis-only fits and the axis-weighted degree-3 fit reach the
+/// 1 % line too. Quadrature error of both sides < 0.3 % of a value.
+#[test]
+fn fitted_rtfs_match_the_traced_prescriptions() {
+    let rows = rows();
     for (r, d) in rows.iter().filter_map(|r| {
         let d = r.model.strip_prefix("rtf-degree")?;
         d.parse::<usize>().ok().map(|d| (r, d))
@@ -374,40 +383,15 @@ fn optics_fitted_rtfs_match_prescriptions_and_zemax() {
             r.model,
             r.ri_err_vs_prescription
         );
-        assert!(
-            r.esf_rmse_vs_prescription <= esf_limit(r.lens, d),
-            "{} {}: ESF RMSE {}",
-            r.lens,
-            r.model,
-            r.esf_rmse_vs_prescription
-        );
-    }
-    // Film-plane residuals of the default fit (regression guards at 1.5×
-    // the measured RMS: double Gauss 14.1/3.5/0.99/0.32/0.09 µm, Tessar
-    // 206/310/196/102/62 µm at degrees 3–7; the Tessar's outer field, 42°
-    // and strongly vignetted, dominates).
-    let film_limit = |lens: &str, d: usize| match (lens, d) {
-        ("dgauss28deg", 3) => 21.0,
-        ("dgauss28deg", 4) => 5.3,
-        ("dgauss28deg", 5) => 1.5,
-        ("dgauss28deg", _) => 0.5,
-        ("tessar", 3) => 310.0,
-        ("tessar", 4) => 465.0,
-        ("tessar", 5) => 295.0,
-        ("tessar", 6) => 155.0,
-        _ => 95.0,
-    };
-    for (r, d) in rows.iter().filter_map(|r| {
-        let d = r.model.strip_prefix("rtf-degree")?;
-        d.parse::<usize>().ok().map(|d| (r, d))
-    }) {
-        assert!(
-            r.film_rms_um.is_finite() && r.film_rms_um <= film_limit(r.lens, d),
-            "{} {}: film residual RMS {} µm",
-            r.lens,
-            r.model,
-            r.film_rms_um
-        );
+        if d >= 4 {
+            assert!(
+                r.esf_rmse_vs_prescription <= 0.01,
+                "{} {}: ESF RMSE {}",
+                r.lens,
+                r.model,
+                r.esf_rmse_vs_prescription
+            );
+        }
     }
     // Feasibility: fitted to only the rays the on-axis ESF traces, every
     // degree 3–7 of this polynomial form reaches the 1 % line (measured
@@ -442,15 +426,16 @@ fn optics_fitted_rtfs_match_prescriptions_and_zemax() {
             r.ri_err_vs_prescription
         );
     }
-    // The paper's enclosing ellipses let light through at vignetted fields
-    // (RI +0.03…+0.08), which is why they are not the default.
-    for r in rows
-        .iter()
-        .filter(|r| r.model.ends_with("enclosing-ellipses"))
-    {
-        assert!(r.ri_err_vs_prescription > 0.02, "{} {}", r.lens, r.model);
-    }
-    // The prescription itself reproduces Zemax's geometric ESF (≤ 1.5 %).
+}
+
+/// Independent reference: the prescription's own geometric ESF against
+/// Zemax's (measured RMSE 0.99 % double Gauss, 0.61 % Tessar; bound 1.5 %:
+/// our 40×40 pupil quadrature < 0.3 %, the rest Zemax's own sampling).
+/// (RI against Zemax is tabulated, not asserted: the traced prescription
+/// differs from Zemax's RI tables by up to 0.033 / 0.065, unexplained.)
+#[test]
+fn prescriptions_reproduce_the_zemax_esf() {
+    let rows = rows();
     for r in rows.iter().filter(|r| r.model == "prescription") {
         assert!(
             r.esf_rmse_vs_zemax <= 0.015,
@@ -458,6 +443,64 @@ fn optics_fitted_rtfs_match_prescriptions_and_zemax() {
             r.lens,
             r.esf_rmse_vs_zemax
         );
+    }
+}
+
+/// REGRESSION GUARD, not a physics check: bounds set from the run of
+/// 2026-11-23 (values quoted below) with no independent truth behind them.
+/// They fail when the fitter's behaviour changes (film-plane residuals of the
+/// default fit at 1.5× the measured RMS; degree 3, which cannot be accurate
+/// on axis and over the field at once, at 3 % on-axis ESF where it measured
+/// 1.8 % / 2.5 %; the paper's enclosing ellipses letting light through at
+/// vignetted fields, RI +0.03…+0.08). After an intended change, re-measure
+/// (`cargo test --release --test optics_rtf_fit -- --nocapture` prints the
+/// table) and update these bounds with it.
+#[test]
+fn regression_guard_rtf_fit_residuals_as_measured_on_2026_11_23() {
+    let rows = rows();
+    for r in rows.iter().filter(|r| r.model == "rtf-degree3") {
+        assert!(
+            r.esf_rmse_vs_prescription <= 0.03,
+            "{} {}: ESF RMSE {}",
+            r.lens,
+            r.model,
+            r.esf_rmse_vs_prescription
+        );
+    }
+    // Film-plane residuals of the default fit (regression guards at 1.5×
+    // the measured RMS: double Gauss 14.1/3.5/0.99/0.32/0.09 µm, Tessar
+    // 206/310/196/102/62 µm at degrees 3–7; the Tessar's outer field, 42°
+    // and strongly vignetted, dominates).
+    let film_limit = |lens: &str, d: usize| match (lens, d) {
+        ("dgauss28deg", 3) => 21.0,
+        ("dgauss28deg", 4) => 5.3,
+        ("dgauss28deg", 5) => 1.5,
+        ("dgauss28deg", _) => 0.5,
+        ("tessar", 3) => 310.0,
+        ("tessar", 4) => 465.0,
+        ("tessar", 5) => 295.0,
+        ("tessar", 6) => 155.0,
+        _ => 95.0,
+    };
+    for (r, d) in rows.iter().filter_map(|r| {
+        let d = r.model.strip_prefix("rtf-degree")?;
+        d.parse::<usize>().ok().map(|d| (r, d))
+    }) {
+        assert!(
+            r.film_rms_um.is_finite() && r.film_rms_um <= film_limit(r.lens, d),
+            "{} {}: film residual RMS {} µm",
+            r.lens,
+            r.model,
+            r.film_rms_um
+        );
+    }
+    // The paper's enclosing ellipses let light through at vignetted fields
+    // (RI +0.03…+0.08), which is why they are not the default.
+    for r in rows
+        .iter()
+        .filter(|r| r.model.ends_with("enclosing-ellipses"))
+    {
+        assert!(r.ri_err_vs_prescription > 0.02, "{} {}", r.lens, r.model);
     }
 }
 

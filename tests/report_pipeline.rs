@@ -398,6 +398,32 @@ fn diff_cli_reads_directories_and_git_revisions() {
     );
 }
 
+/// A report must open offline: its Content-Security-Policy forbids every
+/// fetch, and the only absolute URLs in it are XML namespace names
+/// (`http://www.w3.org/…`, identifiers that are never fetched) — no
+/// `src`/`href`/`url(…)` pointing at a server.
+fn assert_no_network(html: &str) {
+    assert!(
+        html.contains("content=\"default-src 'none';"),
+        "report lacks the CSP that blocks network access"
+    );
+    for scheme in ["http://", "https://", "//cdn", "ftp://"] {
+        for (i, _) in html.match_indices(scheme) {
+            let before = &html[i.saturating_sub(16)..i];
+            let after = &html[i..(i + 40).min(html.len())];
+            assert!(
+                scheme == "http://"
+                    && after.starts_with("http://www.w3.org/")
+                    && (before.ends_with("xmlns=\"") || before.ends_with("xmlns:xlink=\"")),
+                "network reference in the report: …{before}{after}…"
+            );
+        }
+    }
+    for bad in ["src=\"//", "href=\"//", "url(//", "@import"] {
+        assert!(!html.contains(bad), "network reference {bad} in the report");
+    }
+}
+
 #[test]
 fn report_and_index_render_every_plot_and_open_in_chromium() {
     let tmp = tempfile::tempdir().unwrap();
@@ -430,12 +456,9 @@ fn report_and_index_render_every_plot_and_open_in_chromium() {
         html.contains("data:image/png;base64,") && html.contains("<rect"),
         "preview with ROI overlay"
     );
-    assert!(
-        !html.contains("http://")
-            || html.matches("http://").all(|_| true) && !html.contains("src=\"http"),
-        "no network"
-    );
+    assert_no_network(&html);
     let index = std::fs::read_to_string(root.join("index.html")).unwrap();
+    assert_no_network(&index);
     // (minijinja's HTML escaping writes '/' as &#x2f; inside the href.)
     assert!(
         index.contains("report.html\">fig-test</a>") && index.contains("sfr mtf50 = "),
