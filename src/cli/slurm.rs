@@ -405,3 +405,27 @@ pub fn slurm(a: SlurmArgs) -> Result<i32> {
     );
     Ok(0)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// bash reads back exactly the path `sh` quoted.
+    #[test]
+    fn quoted_paths_survive_bash() {
+        for p in ["plain/path.kdl", "it's here", "a b/$HOME/`x`", "-x", ""] {
+            let o = Command::new("bash")
+                .args(["-c", &format!("printf %s {}", sh(Path::new(p)))])
+                .output()
+                .unwrap();
+            assert_eq!(String::from_utf8_lossy(&o.stdout), p);
+        }
+    }
+
+    #[test]
+    fn job_names_are_plain_words() {
+        assert_eq!(job_name(&["grid12"]), "camsim-grid12");
+        assert_eq!(job_name(&["a b", "c/d"]), "camsim-a_b+c_d");
+        assert_eq!(job_name(&[&"x".repeat(100)]).len(), 64);
+    }
+}
