@@ -412,6 +412,28 @@ fn slurm_array_sweep_merges_to_the_single_process_results() {
         );
     }
 
+    // sbatch refusing a job is an error (exit 3) with its reason.
+    let out = tmp.path().join("refused");
+    let o = camsim(
+        &[
+            "slurm",
+            GRID12,
+            "--partition",
+            "no-such-partition",
+            "--out",
+            out.to_str().unwrap(),
+            "--submit",
+        ],
+        &env,
+    );
+    assert_eq!(o.status.code(), Some(3));
+    assert!(
+        text(&o.stderr).contains("invalid partition"),
+        "{}",
+        text(&o.stderr)
+    );
+    assert!(o.stdout.is_empty(), "no job id is printed");
+
     // 2. The whole sweep: 4 array tasks, then the merge job.
     let out = tmp.path().join("sweep");
     let logs = out.join("slurm/camsim-grid12/logs");
