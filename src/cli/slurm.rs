@@ -38,7 +38,7 @@ const DEFAULT_MAX_TASKS: usize = 1000;
 #[derive(Args)]
 pub struct SlurmArgs {
     /// Experiment files (or directories of *.kdl files) swept together.
-    #[arg(required = true)]
+    #[arg(required = true, value_name = "EXPERIMENT")]
     pub paths: Vec<PathBuf>,
     /// Array tasks, one shard each [default: the largest experiment's
     /// variant count, at most 1000].
