@@ -32,6 +32,8 @@ enum Command {
     Run(cli::experiment::RunArgs),
     /// Merge shard results directories into one.
     Merge(cli::experiment::MergeArgs),
+    /// Write (and with --submit, submit) a sweep as a Slurm job array plus a merge job.
+    Slurm(cli::slurm::SlurmArgs),
     /// Render a scene file's own camera and film to a spectral EXR.
     Render(cli::render::RenderArgs),
     /// Benchmarks (renderer throughput and equal-time error, parser throughput, sensor).
@@ -74,6 +76,7 @@ fn main() {
         Command::Plan(a) => cli::experiment::plan(a),
         Command::Run(a) => cli::experiment::run(a),
         Command::Merge(a) => cli::experiment::merge(a),
+        Command::Slurm(a) => cli::slurm::slurm(a),
         Command::Render(a) => cli::render::render(a),
         Command::Bench(a) => cli::render::bench(a),
         Command::Scene(c) => cli::scene::run(c),

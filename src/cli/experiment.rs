@@ -111,7 +111,7 @@ pub fn plan(a: PlanArgs) -> Result<i32> {
 
 /// Experiment files named by the arguments: files as given; directories →
 /// their `*.kdl` files (sorted), setups skipped later.
-fn collect(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
+pub fn collect(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
     let mut out = Vec::new();
     for p in paths {
         if p.is_dir() {

@@ -9,3 +9,4 @@ pub mod render;
 pub mod report;
 pub mod scene;
 pub mod sensor;
+pub mod slurm;
