@@ -149,4 +149,19 @@ AttributeEnd
     assert_eq!(o.status.code(), Some(1), "{err}");
     assert!(err.contains("IoU"), "{err}");
     assert!(out.join("iou.csv").exists() && out.join("side-by-side.png").exists());
+    // With --pinhole camsim's labels follow its pinhole with the lens' field
+    // of view: the geometry itself agrees.
+    let o = camsim(&[
+        "pov",
+        scene.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--pinhole",
+    ]);
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
 }

@@ -28,6 +28,11 @@ pub struct PovArgs {
     /// Fail (exit 1) when an object larger than 100 pixels has a lower IoU.
     #[arg(long)]
     pub min_iou: Option<f64>,
+    /// Render camsim's labels through its pinhole with the camera's field of
+    /// view instead of the camera itself (a real lens' distortion is not a
+    /// geometry error).
+    #[arg(long)]
+    pub pinhole: bool,
 }
 
 /// Load a KDL or pbrt scene with its own camera and film.
@@ -106,8 +111,10 @@ pub fn pov(a: PovArgs) -> Result<i32> {
     };
     let export_only = a.out.extension().is_some_and(|e| e == "pov");
     if export_only {
-        if a.width.is_some() || a.height.is_some() || a.min_iou.is_some() {
-            return usage("--width, --height and --min-iou need --out DIR (not a .pov file)");
+        if a.width.is_some() || a.height.is_some() || a.min_iou.is_some() || a.pinhole {
+            return usage(
+                "--width, --height, --min-iou and --pinhole need --out DIR (not a .pov file)",
+            );
         }
         let scene = load_scene(&a.scene)?;
         let film = scene.film.clone().unwrap_or_default();
@@ -139,7 +146,11 @@ pub fn pov(a: PovArgs) -> Result<i32> {
         .ok_or_else(|| Error::invalid(format!("{}: the scene has no camera", a.scene.display())))?;
     let camera = scene_camera(spec, &film)?;
     let (w, h) = check_size(&film, a.width, a.height);
-    let s = sanity::check(&scene, camera.as_ref(), &film, w, h)?;
+    let s = if a.pinhole {
+        sanity::check_as_pinhole(&scene, camera.as_ref(), &film, w, h)?
+    } else {
+        sanity::check(&scene, camera.as_ref(), &film, w, h)?
+    };
     // Everything is computed before the first file is written.
     let csv = s.csv()?;
     let png = s.side_by_side_png()?;

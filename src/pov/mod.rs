@@ -19,4 +19,4 @@ pub mod sanity;
 
 pub use camera::PinholeEquivalent;
 pub use export::{export_and_render, labels_to_pov, scene_to_pov};
-pub use sanity::{IouRow, Sanity, check};
+pub use sanity::{IouRow, Sanity, check, check_as_pinhole};
