@@ -279,7 +279,12 @@ pub fn export_and_render(
     let text = scene_to_pov(scene, film)?;
     crate::diag::write_atomic(pov_path, text.as_bytes())?;
     if let Some(png) = png {
-        let bytes = super::povray::render_png(&text, film.width_px, film.height_px, true)?;
+        let bytes = super::povray::render_png(
+            &text,
+            film.width_px,
+            film.height_px,
+            super::povray::Mode::Preview,
+        )?;
         crate::diag::write_atomic(png, &bytes)?;
     }
     Ok(())

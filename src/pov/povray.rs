@@ -23,11 +23,20 @@ pub fn available() -> bool {
         .is_ok()
 }
 
+/// How to render.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Mode {
+    /// Exactly one ray through each pixel centre (no antialiasing) and
+    /// `File_Gamma=1.0` (no transfer curve), so flat label colours come back
+    /// byte for byte.
+    Labels,
+    /// Antialiased, sRGB-encoded: a picture to look at.
+    Preview,
+}
+
 /// Render POV-Ray scene text to an 8-bit RGB PNG of `width` × `height` and
-/// return the PNG bytes. `antialias` = false shoots exactly one ray through
-/// each pixel centre; `File_Gamma=1.0` writes colours without a transfer
-/// curve (so flat label colours come back byte for byte).
-pub fn render_png(pov_text: &str, width: u32, height: u32, antialias: bool) -> Result<Vec<u8>> {
+/// return the PNG bytes.
+pub fn render_png(pov_text: &str, width: u32, height: u32, mode: Mode) -> Result<Vec<u8>> {
     if width == 0 || height == 0 {
         return Err(Error::invalid(format!(
             "POV-Ray image size {width}×{height} is empty"
@@ -45,12 +54,11 @@ pub fn render_png(pov_text: &str, width: u32, height: u32, antialias: bool) -> R
         .arg("+Oscene.png")
         .arg(format!("+W{width}"))
         .arg(format!("+H{height}"))
-        .args(["+FN8", "-UA", "-D", "-V", "-P", "File_Gamma=1.0"]);
-    if antialias {
-        cmd.arg("+A0.1");
-    } else {
-        cmd.arg("-A");
-    }
+        .args(["+FN8", "-UA", "-D", "-V", "-P"]);
+    match mode {
+        Mode::Labels => cmd.args(["-A", "File_Gamma=1.0"]),
+        Mode::Preview => cmd.arg("+A0.1"),
+    };
     let out = match cmd.output() {
         Ok(o) => o,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {

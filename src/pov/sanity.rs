@@ -128,7 +128,7 @@ pub fn povray_labels(
     height: u32,
 ) -> Result<(LabelImage, String)> {
     let text = labels_to_pov(scene, camera)?;
-    let png = super::povray::render_png(&text, width, height, false)?;
+    let png = super::povray::render_png(&text, width, height, super::povray::Mode::Labels)?;
     let (w, h, px) = super::povray::decode_rgb8(&png, Path::new("povray output"))?;
     if (w, h) != (width, height) {
         return Err(Error::invalid(format!(
