@@ -103,8 +103,17 @@ fn sensor_film() -> FilmSpec {
 
 /// The paper's camera: the Pixel 4a RTF lens at its infinity film distance.
 fn paper_lens() -> Box<dyn Camera> {
-    camsim::optics::analysis::load_lens_camera(Path::new(RTF), Some(FILM_DISTANCE_M), None, None)
-        .unwrap()
+    camsim::optics::camera::build(
+        &camsim::scene::CameraModel::LensFile {
+            path: Path::new(RTF).to_path_buf(),
+            film_distance_m: Some(FILM_DISTANCE_M),
+            focus_distance_m: None,
+            aperture_diameter_m: None,
+            rtf_fit: None,
+        },
+        &sensor_film(),
+    )
+    .unwrap()
 }
 
 /// camsim's own pinhole for the paper lens' field of view: a Pinhole whose
@@ -282,7 +291,7 @@ fn bitterli_pbrt_v4_cornell_box_agrees() {
     let film = scene.film.clone().unwrap();
     let spec = scene.camera.as_ref().unwrap();
     assert!(matches!(spec.model, CameraModel::Pinhole { .. }));
-    let cam = camsim::optics::pinhole::camera_from_spec(spec, &film).unwrap();
+    let cam = camsim::optics::camera::build(&spec.model, &film).unwrap();
     let s = check(&scene, cam.as_ref(), &film, 256, 256).unwrap();
     assert_passes(
         "bitterli",

@@ -194,7 +194,7 @@ fn every_shape_kind_agrees_through_a_pinhole() {
         fov_deg: 60.0,
         f_number: 2.0,
     });
-    let cam = camsim::optics::pinhole::camera_from_spec(s.camera.as_ref().unwrap(), &FILM).unwrap();
+    let cam = camsim::optics::camera::build(&s.camera.as_ref().unwrap().model, &FILM).unwrap();
     let r = camsim::pov::check(&s, cam.as_ref(), &FILM, 360, 240).unwrap();
     assert_all_pass("pinhole", &r, &ALL);
 }

@@ -49,40 +49,21 @@ pub fn load_scene(path: &Path) -> Result<camsim::scene::Scene> {
     }
 }
 
-/// The renderer's camera for the scene's own camera model.
+/// The renderer's camera for the scene's own camera model (the one camera
+/// factory). Labels come from chief rays (pupil centre), which a lens file's
+/// aperture size does not move, so a stopped-down lens file is checked at its
+/// full aperture.
 fn scene_camera(spec: &CameraSpec, film: &FilmSpec) -> Result<Box<dyn camsim::optics::Camera>> {
-    match &spec.model {
-        CameraModel::Pinhole { .. } => camsim::optics::pinhole::camera_from_spec(spec, film),
-        CameraModel::ThinLens {
-            focal_length_m,
-            f_number,
-            focus_distance_m,
-        } => Ok(Box::new(camsim::optics::thin_lens::ThinLens::new(
-            *focal_length_m,
-            *f_number,
-            *focus_distance_m,
-        )?)),
-        CameraModel::LensFile {
-            path,
-            film_distance_m,
-            focus_distance_m,
-            aperture_diameter_m,
-        } => {
-            // Labels come from chief rays (pupil centre), which the aperture
-            // size does not move; the renderer cannot stop a lens file down.
-            if aperture_diameter_m.is_some() {
-                eprintln!(
-                    "note: the lens' aperture diameter is not used (labels follow chief rays)"
-                );
-            }
-            camsim::optics::analysis::load_lens_camera(
-                path,
-                *film_distance_m,
-                *focus_distance_m,
-                None,
-            )
-        }
+    let mut model = spec.model.clone();
+    if let CameraModel::LensFile {
+        aperture_diameter_m,
+        ..
+    } = &mut model
+        && aperture_diameter_m.take().is_some()
+    {
+        eprintln!("note: the lens' aperture diameter is not used (labels follow chief rays)");
     }
+    camsim::optics::camera::build(&model, film)
 }
 
 /// Check image size: the flags, else the film's size scaled to ≤ 640 px on

@@ -25,7 +25,7 @@
 //! Exit codes: 0 written (and submitted); 1 an invalid experiment (nothing
 //! written); 2 usage; 3 I/O, no `sbatch` on this machine, or `sbatch` failed.
 
-use camsim::experiment::{self, DocKind, Loader, hooks};
+use camsim::experiment::{self, DocKind, Loader};
 use camsim::{Error, Result};
 use clap::Args;
 use std::fmt::Write as _;
@@ -278,7 +278,6 @@ fn on_path(tool: &str) -> bool {
 }
 
 pub fn slurm(a: SlurmArgs) -> Result<i32> {
-    hooks::install_defaults();
     if a.submit && !on_path("sbatch") {
         return Err(Error::invalid(
             "--submit: sbatch is not on PATH, so Slurm is not installed on this machine. \
