@@ -880,3 +880,51 @@ fn scene_info_cli_prints_json() {
     assert_eq!(bad.status.code(), Some(3));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("unknown_directive.pbrt:2:3"));
 }
+
+#[test]
+fn c34_reverse_orientation_on_spheres_cylinders_and_normals() {
+    let s = load("34_reverse_shapes.pbrt").scene;
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    assert!(s.spheres.is_empty(), "a reversed sphere is a mesh");
+    assert_eq!(s.meshes.len(), 4);
+    let c = DVec3::new(2.0, 0.0, 0.0);
+    // 1: every triangle faces the centre, every shading normal too; radius 0.5.
+    let m = &s.meshes[0];
+    for t in 0..m.indices.len() {
+        let [a, _, _] = m.indices[t];
+        let p = vtx(m, a as usize);
+        near((p - c).length(), 0.5, 1e-6);
+        assert!(tri_normal(m, t).dot(c - p) > 0.0, "triangle {t} faces out");
+    }
+    let n = m.normals.as_ref().unwrap();
+    for (i, v) in n.iter().enumerate() {
+        let v = DVec3::new(v.x as f64, v.y as f64, v.z as f64);
+        close(v, (c - vtx(m, i)) / 0.5);
+    }
+    assert!(!m.emission.as_ref().unwrap().two_sided);
+    // 2, 3: cylinder sides out / in; 3 spans φ ≤ 180° (y ≥ 0).
+    for (k, out) in [(1usize, 1.0), (2, -1.0)] {
+        let m = &s.meshes[k];
+        for t in 0..m.indices.len() {
+            let [a, b, cc] = m.indices[t];
+            let mid = (vtx(m, a as usize) + vtx(m, b as usize) + vtx(m, cc as usize)) / 3.0;
+            let radial = DVec3::new(mid.x, mid.y, 0.0).normalize();
+            assert!(
+                tri_normal(m, t).dot(radial) * out > 0.99,
+                "mesh {k} triangle {t}"
+            );
+        }
+        let (zmin, zmax) = m
+            .positions
+            .iter()
+            .fold((f32::MAX, f32::MIN), |(lo, hi), p| {
+                (lo.min(p.z), hi.max(p.z))
+            });
+        assert_eq!((zmin, zmax), (0.0, 2.0));
+    }
+    assert!(s.meshes[2].positions.iter().all(|p| p.y >= -1e-6));
+    // 4: N negated, triangle wound to face it.
+    close(tri_normal(&s.meshes[3], 0), -DVec3::Z);
+    let n = s.meshes[3].normals.as_ref().unwrap()[0];
+    close(DVec3::new(n.x as f64, n.y as f64, n.z as f64), -DVec3::Z);
+}

@@ -22,9 +22,17 @@ pub struct RenderArgs {
     pub out: PathBuf,
     #[arg(long)]
     pub seed: Option<u64>,
+    /// Bounce limit (pbrt's maxdepth; default: the KDL scene's, else 6 —
+    /// a pbrt file's Integrator maxdepth is not read).
+    #[arg(long)]
+    pub max_bounces: Option<u32>,
     /// pbrt scenes: replace the ISET Cornell box placeholder materials by the paper's spectra.
     #[arg(long)]
     pub paper_spectra: bool,
+    /// What a pixel records: `irradiance` at the sensor, W/(m²·nm) (default),
+    /// or `radiance` along the camera ray, W/(sr·m²·nm), as pbrt's film.
+    #[arg(long, value_enum, default_value = "irradiance")]
+    pub film: camsim::optics::radiance::FilmQuantity,
 }
 
 #[derive(Args)]
@@ -107,10 +115,10 @@ pub fn render(a: RenderArgs) -> Result<i32> {
         sf.scene.camera.as_ref().ok_or_else(|| {
             Error::invalid(format!("{}: the scene has no camera", a.scene.display()))
         })?;
-    let camera = camera_from_spec(spec, &film)?;
+    let camera = camsim::optics::radiance::for_film(camera_from_spec(spec, &film)?, a.film);
     let settings = RenderSettings {
         spp: a.spp.or(sf.spp).unwrap_or(64),
-        max_bounces: sf.max_bounces.unwrap_or(6),
+        max_bounces: a.max_bounces.or(sf.max_bounces).unwrap_or(6),
         seed: a.seed.unwrap_or(0),
         threads: a.threads.unwrap_or(0),
         roi: a.roi.as_deref().map(parse_roi).transpose()?,
@@ -133,7 +141,7 @@ pub fn render(a: RenderArgs) -> Result<i32> {
         "paths_per_s": paths / img.render_s.max(1e-9),
         "nan_count": img.nan_count,
         "settings": settings,
-        "units": "irradiance W/(m²·nm)",
+        "units": a.film.units(),
         "labels": img.label_names,
         "warnings": sf.scene.warnings,
     });

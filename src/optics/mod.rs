@@ -46,5 +46,6 @@ pub trait Camera: Send + Sync {
 pub mod analysis;
 pub mod fit;
 pub mod prescription;
+pub mod radiance;
 pub mod rtf;
 pub mod thin_lens;
