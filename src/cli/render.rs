@@ -33,6 +33,9 @@ pub struct RenderArgs {
     /// or `radiance` along the camera ray, W/(sr·m²·nm), as pbrt's film.
     #[arg(long, value_enum, default_value = "irradiance")]
     pub film: camsim::optics::radiance::FilmQuantity,
+    /// pbrt scenes: read as this pbrt version (default: decided by the file's syntax).
+    #[arg(long, value_enum)]
+    pub pbrt_version: Option<camsim::scene::pbrt::dialect::PbrtVersion>,
 }
 
 #[derive(Args)]
@@ -91,7 +94,13 @@ pub fn render(a: RenderArgs) -> Result<i32> {
     let sf = if ext == "kdl" {
         load_kdl_scene(&a.scene)?
     } else if ext == "pbrt" || ext == "gz" {
-        let mut scene = super::pov::load_scene(&a.scene)?;
+        let mut scene = camsim::scene::pbrt::load(
+            &a.scene,
+            &camsim::scene::pbrt::LoadOptions {
+                pbrt_version: a.pbrt_version,
+                ..Default::default()
+            },
+        )?;
         if a.paper_spectra {
             camsim::scene::pbrt::paper::apply_paper_spectra(&mut scene)?;
         }

@@ -18,12 +18,13 @@
 //!   `interface` → an index-matched Dielectric (η = 1, light passes unchanged).
 //!   Roughness is converted to the microfacet α: pbrt-v4 `sqrt(r)`, pbrt-v3 its
 //!   polynomial in ln r, when `remaproughness` is true.
-//! - Lights follow pbrt-v4's photometric normalisation: an emission spectrum is
-//!   divided by ∫ȳ(λ)S(λ)dλ (for `rgb`, of the colour space's white only) so that a
-//!   light of `scale` 1 has ∫ȳL dλ = 1, pbrt's "1 nit"; camsim keeps that number in
-//!   W/(sr·m²·nm). `power` (point, spot, area) and `illuminance` (distant, infinite)
-//!   rescale as pbrt-v4 does. pbrt-v3 files get the same v4 meaning. Absolute
-//!   radiometry of the paper's box comes from `apply_paper_spectra`.
+//! - Lights in pbrt-v4 files follow pbrt-v4's photometric normalisation: an emission
+//!   spectrum is divided by ∫ȳ(λ)S(λ)dλ (for `rgb`, of the colour space's white only)
+//!   so that a light of `scale` 1 has ∫ȳL dλ = 1, pbrt's "1 nit"; camsim keeps that
+//!   number in W/(sr·m²·nm). `power` (point, spot, area) and `illuminance` (distant,
+//!   infinite) rescale as pbrt-v4 does. In pbrt-v3 files (decided by the syntax,
+//!   [`super::dialect`]) the spectrum × `scale` is taken literally, as pbrt-v3 does.
+//!   Absolute radiometry of the paper's box comes from `apply_paper_spectra`.
 //! - Camera: `perspective` → Pinhole (lens radius 0) or ThinLens (focal length from the
 //!   film's physical size: `diagonal` mm, default 35, and `fov` across the shorter
 //!   side; N = f/(2·lensradius)); `realistic` → LensFile (lens file path resolved
@@ -563,7 +564,8 @@ fn photometric(s: &Spectrum) -> f64 {
     luminance_y(s) * luminance_y_of_one()
 }
 
-fn luminance_y_of_one() -> f64 {
+/// ∫ȳ(λ)dλ, 360–830 nm at 1 nm (106.857): pbrt-v4's normaliser of a constant spectrum.
+pub(crate) fn luminance_y_of_one() -> f64 {
     static Y: std::sync::OnceLock<f64> = std::sync::OnceLock::new();
     *Y.get_or_init(|| {
         let grid = crate::spectrum::WavelengthGrid {
@@ -593,7 +595,10 @@ fn emission(
         None => super::params::rgb_to_spectrum([1.0, 1.0, 1.0], SpectrumKind::Illuminant, name)
             .expect("finite white"),
     };
-    let norm = if is_rgb || !p.has(name) {
+    let norm = if ctx.dialect.version == super::dialect::PbrtVersion::V3 {
+        // pbrt-v3: the numbers are the radiance (or intensity) itself.
+        1.0
+    } else if is_rgb || !p.has(name) {
         luminance_y_of_one()
     } else {
         photometric(&s)
