@@ -78,3 +78,79 @@ fn pbrt_white_furnace_reverse_orientation_radiance_film() {
         );
     }
 }
+
+/// A spectral film's `nbuckets`/`lambdamin`/`lambdamax` are honoured: the EXR
+/// has one channel per bucket, named (pbrt-v4's way) by the bucket centre,
+/// and in the white furnace every bucket reads 1/∫ȳ (the emitter and the
+/// reflectance are constant over 300–900 nm, so even buckets outside camsim's
+/// default 400–700 nm must). Tolerance as in the furnace test above.
+#[test]
+fn pbrt_spectral_film_buckets_honoured() {
+    let base = std::fs::read_to_string("tests/pbrt/radiometry/white_furnace.pbrt").unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    for (params, want_nm) in [
+        (
+            "\"integer nbuckets\" 31 \"float lambdamin\" 395 \"float lambdamax\" 705",
+            (0..31).map(|k| 400.0 + 10.0 * k as f64).collect::<Vec<_>>(),
+        ),
+        (
+            // pbrt-v4 defaults for the range: 360–830 nm.
+            "\"integer nbuckets\" 4",
+            vec![418.75, 536.25, 653.75, 771.25],
+        ),
+    ] {
+        let text = base.replace("Film \"spectral\"", &format!("Film \"spectral\" {params}"));
+        assert_ne!(text, base);
+        let scene = dir.path().join("f.pbrt");
+        std::fs::write(&scene, text).unwrap();
+        let bands = render(
+            &scene,
+            &[
+                "--film",
+                "radiance",
+                "--spp",
+                "256",
+                "--seed",
+                "2",
+                "--max-bounces",
+                "30",
+            ],
+        );
+        let got: Vec<f64> = bands.iter().map(|b| b.0).collect();
+        assert_eq!(got, want_nm, "{params}");
+        for (nm, v) in &bands {
+            let mean = v.iter().sum::<f64>() / v.len() as f64;
+            assert!(
+                (mean * CIE_Y_INTEGRAL - 1.0).abs() < 0.01,
+                "{params}: {nm} nm reads {mean}"
+            );
+        }
+    }
+}
+
+/// Buckets that cannot be rendered are a located error, not a silent default.
+#[test]
+fn pbrt_spectral_film_bad_buckets_are_located_errors() {
+    let base = std::fs::read_to_string("tests/pbrt/radiometry/white_furnace.pbrt").unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    for (params, needle) in [
+        ("\"integer nbuckets\" 0", "nbuckets must be 1..10000"),
+        ("\"float lambdamin\" 900", "0 < lambdamin < lambdamax"),
+    ] {
+        let scene = dir.path().join("bad.pbrt");
+        std::fs::write(
+            &scene,
+            base.replace("Film \"spectral\"", &format!("Film \"spectral\" {params}")),
+        )
+        .unwrap();
+        let o = Command::new(env!("CARGO_BIN_EXE_camsim"))
+            .args(["render", scene.to_str().unwrap(), "--out"])
+            .arg(dir.path().join("bad.exr"))
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success());
+        assert!(err.contains("bad.pbrt:4:") && err.contains(needle), "{err}");
+        assert!(!dir.path().join("bad.exr").exists());
+    }
+}

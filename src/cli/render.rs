@@ -91,16 +91,20 @@ pub fn render(a: RenderArgs) -> Result<i32> {
         .and_then(|e| e.to_str())
         .unwrap_or("")
         .to_ascii_lowercase();
+    // A pbrt spectral film's buckets (None: the default grid).
+    let mut grid = None;
     let sf = if ext == "kdl" {
         load_kdl_scene(&a.scene)?
     } else if ext == "pbrt" || ext == "gz" {
-        let mut scene = camsim::scene::pbrt::load(
+        let loaded = camsim::scene::pbrt::load_full(
             &a.scene,
             &camsim::scene::pbrt::LoadOptions {
                 pbrt_version: a.pbrt_version,
                 ..Default::default()
             },
         )?;
+        grid = loaded.spectral_grid;
+        let mut scene = loaded.scene;
         if a.paper_spectra {
             camsim::scene::pbrt::paper::apply_paper_spectra(&mut scene)?;
         }
@@ -131,6 +135,7 @@ pub fn render(a: RenderArgs) -> Result<i32> {
         seed: a.seed.unwrap_or(0),
         threads: a.threads.unwrap_or(0),
         roi: a.roi.as_deref().map(parse_roi).transpose()?,
+        grid: grid.unwrap_or_default(),
         ..Default::default()
     };
     let img = camsim::render::render(&sf.scene, camera.as_ref(), &film, &settings)?;

@@ -20,8 +20,9 @@ pub fn differences_from_pbrt(l: &LoadedScene) -> Vec<String> {
          numbers); pbrt-v4's spectral film stores them × ∫ȳ = 106.856895, so divide a pbrt-v4 \
          spectral EXR by 106.856895 to compare"
             .to_string(),
-        "spectral grid: camsim's bands (default 400–700 nm every 10 nm), not the Film's \
-         nbuckets/lambdamin/lambdamax"
+        "spectral grid: camsim's bands (400–700 nm every 10 nm) unless a spectral Film sets \
+         nbuckets/lambdamin/lambdamax (pbrt-v4's own default is 16 buckets over 360–830 nm); \
+         each bucket is sampled at its centre, where pbrt averages over it"
             .to_string(),
     ];
     d.push(match l.dialect.version {

@@ -72,6 +72,8 @@ pub struct LoadedScene {
     pub shape_directives: usize,
     /// The pbrt version the file was read as, and why.
     pub dialect: dialect::Dialect,
+    /// The wavelength grid a `spectral` film asks for (None: camsim's default).
+    pub spectral_grid: Option<crate::spectrum::WavelengthGrid>,
 }
 
 /// Load a pbrt scene file (v4, or v3; see the module docs).
@@ -126,6 +128,7 @@ pub fn parse_text(text: &str, path: &Path, opts: &LoadOptions) -> Result<LoadedS
         prototypes: p.prototypes.clone(),
         shape_directives: p.shape_count,
         dialect: p.ctx.dialect.clone(),
+        spectral_grid: p.film.as_ref().and_then(|f| f.spectral_grid.clone()),
     })
 }
 
@@ -254,6 +257,7 @@ pub fn info_json(l: &LoadedScene) -> serde_json::Value {
         "objects": s.objects.iter().map(|o| o.name.clone()).collect::<Vec<_>>(),
         "camera": camera,
         "film": s.film,
+        "spectral_grid": l.spectral_grid,
         "world_bounds": bounds,
         "pbrt_version": l.dialect.reason,
         "differences_from_pbrt": differences::differences_from_pbrt(l),

@@ -77,6 +77,10 @@ pub enum CameraParams {
 pub struct FilmParams {
     pub spec: FilmSpec,
     pub diagonal_mm: f64,
+    /// A `spectral` film's buckets when the file sets `nbuckets`, `lambdamin`
+    /// or `lambdamax` (pbrt-v4 defaults 16, 360, 830 fill the others): one
+    /// band per bucket, at its centre, as pbrt-v4 names its channels.
+    pub spectral_grid: Option<crate::spectrum::WavelengthGrid>,
 }
 
 impl Default for FilmParams {
@@ -91,6 +95,7 @@ impl Default for FilmParams {
                 crop_window: None,
             },
             diagonal_mm: diag,
+            spectral_grid: None,
         }
     }
 }
@@ -281,9 +286,51 @@ pub fn film_params(ty: &str, tspan: Span, p: &ParamList, ctx: &mut Ctx) -> PResu
         pixel_pitch_m: diag * 1e-3 / (w as f64).hypot(h as f64),
         crop_window: crop,
     };
+    let spectral_grid = if ty == "spectral"
+        && ["nbuckets", "lambdamin", "lambdamax"]
+            .iter()
+            .any(|n| p.has(n))
+    {
+        Some(spectral_grid(p, tspan)?)
+    } else {
+        None
+    };
     Ok(FilmParams {
         spec,
         diagonal_mm: diag,
+        spectral_grid,
+    })
+}
+
+/// pbrt-v4's spectral film buckets: `nbuckets` equal buckets over
+/// [`lambdamin`, `lambdamax`], sampled at their centres.
+fn spectral_grid(p: &ParamList, tspan: Span) -> PResult<crate::spectrum::WavelengthGrid> {
+    let n = p.int("nbuckets", 16)?;
+    let lo = p.float("lambdamin", 360.0)?;
+    let hi = p.float("lambdamax", 830.0)?;
+    if !(1..=10_000).contains(&n) {
+        return Err(SpanError::new(
+            p.span_of("nbuckets").unwrap_or(tspan),
+            format!("spectral film nbuckets must be 1..10000, got {n}"),
+        ));
+    }
+    if !(lo > 0.0 && hi.is_finite() && lo < hi) {
+        let at = p
+            .span_of("lambdamin")
+            .or(p.span_of("lambdamax"))
+            .unwrap_or(tspan);
+        return Err(SpanError::new(
+            at,
+            format!(
+                "spectral film needs 0 < lambdamin < lambdamax (nm), got lambdamin {lo}, lambdamax {hi}"
+            ),
+        ));
+    }
+    let step = (hi - lo) / n as f64;
+    Ok(crate::spectrum::WavelengthGrid {
+        start_nm: lo + 0.5 * step,
+        step_nm: step,
+        count: n as usize,
     })
 }
 
