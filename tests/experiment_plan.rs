@@ -124,7 +124,7 @@ fn bases_merge_and_overrides_win() {
     assert_eq!(s.render.spp, 128);
     assert_eq!(s.render.max_bounces, 2);
     assert_eq!(s.render.seed, 1);
-    assert_eq!(s.additions.len(), 2);
+    assert_eq!(s.additions.len(), 3);
     assert_eq!(s.removals, ["CubeSmall", "CubeLarge"]);
     assert_eq!(s.measures[0].of, ["edge-near", "edge-far"]);
     assert_eq!(

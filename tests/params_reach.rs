@@ -20,7 +20,7 @@ mod sensor_probe;
 
 use camsim::experiment::{self, Loader, language, stages};
 use camsim::params::{Kind, ParamSpec, Params, Schema, Value};
-use camsim::scene::edits::{self, Target, TargetSpec};
+use camsim::scene::edits::{self, TargetSpec};
 use camsim::scene::{CameraModel, Light, Material};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

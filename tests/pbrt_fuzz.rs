@@ -132,7 +132,16 @@ fn mutate(rng: &mut XorShift, src: &[u8]) -> Vec<u8> {
 fn one_hundred_thousand_mutations_no_panic_none_slow() {
     let files = corpus();
     let mut rng = XorShift(0x9E37_79B9_7F4A_7C15);
-    let opts = [LoadOptions { strict: false }, LoadOptions { strict: true }];
+    let opts = [
+        LoadOptions {
+            strict: false,
+            ..Default::default()
+        },
+        LoadOptions {
+            strict: true,
+            ..Default::default()
+        },
+    ];
     let mut worst = (Duration::ZERO, String::new());
     let (mut ok, mut err) = (0usize, 0usize);
     let t0 = Instant::now();

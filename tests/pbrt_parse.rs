@@ -19,7 +19,13 @@ fn load(name: &str) -> LoadedScene {
 }
 
 fn load_strict(name: &str) -> camsim::Result<LoadedScene> {
-    load_full(&dir().join(name), &LoadOptions { strict: true })
+    load_full(
+        &dir().join(name),
+        &LoadOptions {
+            strict: true,
+            ..Default::default()
+        },
+    )
 }
 
 fn vtx(m: &Mesh, i: usize) -> DVec3 {
@@ -764,7 +770,10 @@ fn shipped_mcc_and_bitterli_parse() {
     close(hi, DVec3::new(0.042, 0.056, 0.005));
     let b = load_full(
         &scenes().join("pbrt-v4/bitterli-cornell-box.pbrt"),
-        &LoadOptions { strict: true },
+        &LoadOptions {
+            strict: true,
+            ..Default::default()
+        },
     )
     .unwrap();
     assert_eq!(b.scene.meshes.len(), 8);
@@ -880,4 +889,127 @@ fn scene_info_cli_prints_json() {
         .unwrap();
     assert_eq!(bad.status.code(), Some(3));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("unknown_directive.pbrt:2:3"));
+}
+
+#[test]
+fn c34_reverse_orientation_on_spheres_cylinders_and_normals() {
+    let s = load("34_reverse_shapes.pbrt").scene;
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    assert!(s.spheres.is_empty(), "a reversed sphere is a mesh");
+    assert_eq!(s.meshes.len(), 4);
+    let c = DVec3::new(2.0, 0.0, 0.0);
+    // 1: every triangle faces the centre, every shading normal too; radius 0.5.
+    let m = &s.meshes[0];
+    for t in 0..m.indices.len() {
+        let [a, _, _] = m.indices[t];
+        let p = vtx(m, a as usize);
+        near((p - c).length(), 0.5, 1e-6);
+        assert!(tri_normal(m, t).dot(c - p) > 0.0, "triangle {t} faces out");
+    }
+    let n = m.normals.as_ref().unwrap();
+    for (i, v) in n.iter().enumerate() {
+        let v = DVec3::new(v.x as f64, v.y as f64, v.z as f64);
+        close(v, (c - vtx(m, i)) / 0.5);
+    }
+    assert!(!m.emission.as_ref().unwrap().two_sided);
+    // 2, 3: cylinder sides out / in; 3 spans φ ≤ 180° (y ≥ 0).
+    for (k, out) in [(1usize, 1.0), (2, -1.0)] {
+        let m = &s.meshes[k];
+        for t in 0..m.indices.len() {
+            let [a, b, cc] = m.indices[t];
+            let mid = (vtx(m, a as usize) + vtx(m, b as usize) + vtx(m, cc as usize)) / 3.0;
+            let radial = DVec3::new(mid.x, mid.y, 0.0).normalize();
+            assert!(
+                tri_normal(m, t).dot(radial) * out > 0.99,
+                "mesh {k} triangle {t}"
+            );
+        }
+        let (zmin, zmax) = m
+            .positions
+            .iter()
+            .fold((f32::MAX, f32::MIN), |(lo, hi), p| {
+                (lo.min(p.z), hi.max(p.z))
+            });
+        assert_eq!((zmin, zmax), (0.0, 2.0));
+    }
+    assert!(s.meshes[2].positions.iter().all(|p| p.y >= -1e-6));
+    // 4: N negated, triangle wound to face it.
+    close(tri_normal(&s.meshes[3], 0), -DVec3::Z);
+    let n = s.meshes[3].normals.as_ref().unwrap()[0];
+    close(DVec3::new(n.x as f64, n.y as f64, n.z as f64), -DVec3::Z);
+}
+
+/// pbrt-v3 files keep literal light spectra, pbrt-v4 files are normalised to
+/// 1 nit per unit scale (÷ ∫ȳ = 106.857 for a constant spectrum); the
+/// version comes from the syntax and can be overridden.
+#[test]
+fn pbrt_v3_and_v4_light_semantics_by_syntax() {
+    let v3 = "Film \"image\"\nWorldBegin\nAttributeBegin\nAreaLightSource \"diffuse\" \"spectrum L\" [300 2 900 2]\nShape \"disk\"\nAttributeEnd\nWorldEnd\n";
+    let v4 = v3
+        .replace("Film \"image\"", "Film \"spectral\"")
+        .replace("WorldEnd\n", "");
+    let get = |text: &str, forced| {
+        let l = camsim::scene::pbrt::parse_text(
+            text,
+            &dir().join("inline.pbrt"),
+            &LoadOptions {
+                pbrt_version: forced,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let e = l.scene.disks[0]
+            .emission
+            .as_ref()
+            .unwrap()
+            .radiance
+            .eval(550.0);
+        (e, l.dialect)
+    };
+    use camsim::scene::pbrt::dialect::PbrtVersion;
+    let (e3, d3) = get(v3, None);
+    assert_eq!(d3.version, PbrtVersion::V3, "{}", d3.reason);
+    near(e3, 2.0, 1e-12);
+    let (e4, d4) = get(&v4, None);
+    assert_eq!(d4.version, PbrtVersion::V4, "{}", d4.reason);
+    // ∫ȳ·2 over 360–830 nm, computed here from the CIE table.
+    let y = y_integral(&Spectrum::constant("c", 2.0));
+    near(e4, 2.0 / y, 1e-9);
+    near(e4 * 106.856895, 1.0, 2e-3);
+    let (e, d) = get(v3, Some(PbrtVersion::V4));
+    near(e, e4, 1e-15);
+    assert!(d.reason.contains("set by the caller"));
+}
+
+/// The paper's pbrt-v3 scenes with the paper's spectra do not depend on the
+/// light semantics: the placeholder lights are replaced or removed, so the
+/// scene (and hence its render) is the same whichever version it is read as.
+#[test]
+fn paper_scenes_radiometry_independent_of_pbrt_version() {
+    use camsim::scene::pbrt::dialect::PbrtVersion;
+    for f in [
+        "CornellBoxReference/CornellBoxReference.pbrt",
+        "mccCB/mccCB.pbrt",
+    ] {
+        let read = |v| {
+            let l = load_full(
+                &scenes().join(f),
+                &LoadOptions {
+                    pbrt_version: v,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            let mut s = l.scene;
+            apply_paper_spectra(&mut s).unwrap();
+            (s, l.dialect)
+        };
+        let (auto, d) = read(None);
+        assert_eq!(d.version, PbrtVersion::V3, "{f}: {}", d.reason);
+        let (v4, _) = read(Some(PbrtVersion::V4));
+        assert!(
+            auto == v4,
+            "{f}: the paper scene changed with the pbrt version"
+        );
+    }
 }

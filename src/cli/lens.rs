@@ -31,6 +31,14 @@ pub struct LensRiArgs {
     pub film_distance_mm: Option<f64>,
     #[arg(long)]
     pub wavelength_nm: Option<f64>,
+    /// Comma-separated film heights in mm (default: 41 heights from the
+    /// axis to the edge of the lit film).
+    #[arg(long, value_delimiter = ',')]
+    pub field_heights_mm: Vec<f64>,
+    /// `axis` (default): RI(0) = 1; `max`: the largest value is 1, as
+    /// Zemax's relative-illumination tables are normalised.
+    #[arg(long, default_value = "axis")]
+    pub normalize: camsim::optics::analysis::RiNormalization,
 }
 #[derive(Args)]
 pub struct LensEsfArgs {
@@ -119,8 +127,22 @@ pub fn run(c: LensCmd) -> Result<i32> {
                     None => c.film_distance_mm,
                 },
             };
-            let heights: Vec<f64> = (0..=40).map(|k| max_mm * k as f64 / 40.0).collect();
+            let heights: Vec<f64> = if a.field_heights_mm.is_empty() {
+                (0..=40).map(|k| max_mm * k as f64 / 40.0).collect()
+            } else {
+                if let Some(h) = a
+                    .field_heights_mm
+                    .iter()
+                    .find(|h| !(h.is_finite() && **h >= 0.0))
+                {
+                    return Err(Error::Invalid(format!(
+                        "--field-heights-mm: {h} is not a film height >= 0 mm"
+                    )));
+                }
+                a.field_heights_mm.clone()
+            };
             let ri = analysis::relative_illumination(cam.camera(), &heights, w, 200)?;
+            let ri = analysis::normalize_ri(ri, a.normalize);
             out.push_str("field_height_mm,relative_illumination\n");
             for (h, v) in heights.iter().zip(ri) {
                 out.push_str(&format!("{h},{v}\n"));

@@ -21,9 +21,20 @@ pub struct RenderArgs {
     pub out: PathBuf,
     #[arg(long)]
     pub seed: Option<u64>,
+    /// Bounce limit (pbrt's maxdepth; default: the KDL scene's, else 6 —
+    /// a pbrt file's Integrator maxdepth is not read).
+    #[arg(long)]
+    pub max_bounces: Option<u32>,
     /// pbrt scenes: replace the ISET Cornell box placeholder materials by the paper's spectra.
     #[arg(long)]
     pub paper_spectra: bool,
+    /// What a pixel records: `irradiance` at the sensor, W/(m²·nm) (default),
+    /// or `radiance` along the camera ray, W/(sr·m²·nm), as pbrt's film.
+    #[arg(long, value_enum, default_value = "irradiance")]
+    pub film: camsim::optics::radiance::FilmQuantity,
+    /// pbrt scenes: read as this pbrt version (default: decided by the file's syntax).
+    #[arg(long, value_enum)]
+    pub pbrt_version: Option<camsim::scene::pbrt::dialect::PbrtVersion>,
 }
 
 #[derive(Args)]
@@ -79,10 +90,20 @@ pub fn render(a: RenderArgs) -> Result<i32> {
         .and_then(|e| e.to_str())
         .unwrap_or("")
         .to_ascii_lowercase();
+    // A pbrt spectral film's buckets (None: the default grid).
+    let mut grid = None;
     let sf = if ext == "kdl" {
         load_kdl_scene(&a.scene)?
     } else if ext == "pbrt" || ext == "gz" {
-        let mut scene = super::pov::load_scene(&a.scene)?;
+        let loaded = camsim::scene::pbrt::load_full(
+            &a.scene,
+            &camsim::scene::pbrt::LoadOptions {
+                pbrt_version: a.pbrt_version,
+                ..Default::default()
+            },
+        )?;
+        grid = loaded.spectral_grid;
+        let mut scene = loaded.scene;
         if a.paper_spectra {
             camsim::scene::pbrt::paper::apply_paper_spectra(&mut scene)?;
         }
@@ -106,13 +127,15 @@ pub fn render(a: RenderArgs) -> Result<i32> {
         sf.scene.camera.as_ref().ok_or_else(|| {
             Error::invalid(format!("{}: the scene has no camera", a.scene.display()))
         })?;
-    let camera = camsim::optics::camera::build(&spec.model, &film)?;
+    let camera =
+        camsim::optics::radiance::for_film(camsim::optics::camera::build(&spec.model, &film)?, a.film);
     let settings = RenderSettings {
         spp: a.spp.or(sf.spp).unwrap_or(64),
-        max_bounces: sf.max_bounces.unwrap_or(6),
+        max_bounces: a.max_bounces.or(sf.max_bounces).unwrap_or(6),
         seed: a.seed.unwrap_or(0),
         threads: a.threads.unwrap_or(0),
         roi: a.roi.as_deref().map(parse_roi).transpose()?,
+        grid: grid.unwrap_or_default(),
         ..Default::default()
     };
     let img = camsim::render::render(&sf.scene, camera.as_ref(), &film, &settings)?;
@@ -132,7 +155,7 @@ pub fn render(a: RenderArgs) -> Result<i32> {
         "paths_per_s": paths / img.render_s.max(1e-9),
         "nan_count": img.nan_count,
         "settings": settings,
-        "units": "irradiance W/(m²·nm)",
+        "units": a.film.units(),
         "labels": img.label_names,
         "warnings": sf.scene.warnings,
     });

@@ -5,7 +5,8 @@ use std::path::PathBuf;
 
 #[derive(Subcommand)]
 pub enum SceneCmd {
-    /// Print JSON: counts of shapes, triangles, instances, lights, materials; camera, film, bounds, warnings.
+    /// Print JSON: counts of shapes, triangles, instances, lights, materials; camera, film, bounds,
+    /// the pbrt version the file is read as, where camsim differs from pbrt, warnings.
     Info(InfoArgs),
 }
 
@@ -15,12 +16,21 @@ pub struct InfoArgs {
     /// Treat warnings (unsupported features, unused parameters) as errors.
     #[arg(long)]
     pub strict: bool,
+    /// Read the file as this pbrt version (default: decided by its syntax).
+    #[arg(long, value_enum)]
+    pub pbrt_version: Option<camsim::scene::pbrt::dialect::PbrtVersion>,
 }
 
 pub fn run(c: SceneCmd) -> Result<i32> {
     match c {
         SceneCmd::Info(a) => {
-            let l = load_full(&a.scene, &LoadOptions { strict: a.strict })?;
+            let l = load_full(
+                &a.scene,
+                &LoadOptions {
+                    strict: a.strict,
+                    pbrt_version: a.pbrt_version,
+                },
+            )?;
             let text = serde_json::to_string_pretty(&info_json(&l))
                 .map_err(|e| camsim::Error::invalid(e.to_string()))?;
             use std::io::Write;

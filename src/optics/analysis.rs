@@ -14,29 +14,9 @@
 //! uniform radiance L (object at infinity, no transmission losses) — the
 //! quantity Zemax's "Relative Illumination" integrates over the exit pupil
 //! in direction-cosine space; field height = real image height on the film.
-//! Against the Zemax tables in `lenses/zemax-reference` our prescription
-//! traces are lower at the outer field (max 0.033 double Gauss, 0.065
-//! Tessar). Investigated (numbers at 550 nm; the JSON indices are
-//! wavelength-independent, so the wavelength is not it):
-//! - Double Gauss, unvignetted field (≤ 17.5 mm): our RI equals a trace
-//!   with every aperture but the stop removed (0.9466 vs 0.9464 at 17.5 mm),
-//!   so no clipping error; Zemax is higher by a smooth factor
-//!   ≈ 1 + 0.35·(h/f)² (1.0008, 1.0027, 1.0058, 1.011 at 4.4, 8.8, 13.1,
-//!   17.5 mm). A field-height convention (paraxial vs real image height)
-//!   would need 11 % distortion at 10° to explain that; the double Gauss
-//!   has < 1 %.
-//! - Both curves share the vignetting knee (24–26 mm) and the end of the
-//!   field (43.8 mm ours, 45 mm the last Zemax row at 0), so the apertures
-//!   and the image-side geometry agree.
-//! - Tessar: the gap opens near the axis (−0.006 at 4.6 mm) and stays
-//!   −0.05…−0.065 from 40 mm on, while a stop-only trace is far above both
-//!   (0.618 vs 0.341 Zemax at 64 mm): Zemax vignettes less than the JSON's
-//!   rounded semi-apertures (10.5/8.5 mm) do, which is what different
-//!   (Zemax "automatic") semi-diameters would give.
-//!
-//! We found no convention of ours to change; the Zemax files do not record
-//! their semi-diameters or field settings, so the remaining gap is
-//! documented, not fitted. The RTF acceptance is prescription vs RTF.
+//! Against the Zemax tables in `lenses/zemax-reference` see docs/optics.md:
+//! Zemax's image plane (film distance), its max normalisation
+//! (`RiNormalization::Max`) and its ray-aiming-off pupil explain the gap.
 
 // `!(x > 0.0)` is used on purpose: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -285,6 +265,27 @@ pub fn relative_illumination(
         .par_iter()
         .map(|&h| irradiance_factor(cam, DVec2::new(0.0, h * 1e-3), wavelength_nm, n) / e0)
         .collect())
+}
+
+/// How a relative-illumination curve is normalised.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum RiNormalization {
+    /// The on-axis value is 1 (E(h)/E(0)).
+    Axis,
+    /// The largest value on the curve is 1 (Zemax's tables: lenses whose
+    /// illumination rises off axis, such as the 200° wide angle, read < 1 on axis).
+    Max,
+}
+
+/// Renormalise an on-axis-normalised RI curve.
+pub fn normalize_ri(mut ri: Vec<f64>, how: RiNormalization) -> Vec<f64> {
+    if how == RiNormalization::Max {
+        let m = ri.iter().cloned().fold(0.0, f64::max);
+        if m > 0.0 {
+            ri.iter_mut().for_each(|v| *v /= m);
+        }
+    }
+    ri
 }
 
 /// Geometric ESF/LSF of a straight edge (parallel to y) in the plane

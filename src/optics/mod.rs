@@ -53,5 +53,6 @@ pub mod analysis;
 pub mod camera;
 pub mod fit;
 pub mod prescription;
+pub mod radiance;
 pub mod rtf;
 pub mod thin_lens;

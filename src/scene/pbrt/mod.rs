@@ -1,4 +1,6 @@
-//! camsim's own pbrt-v4 scene parser, reading pbrt-v3 files with their v4 meaning.
+//! camsim's own pbrt-v4 scene parser, reading pbrt-v3 files with their v4 meaning
+//! except for lights, which keep pbrt-v3's literal meaning in files whose syntax is
+//! pbrt-v3 ([`dialect`]; `scene info` reports the version and [`differences`]).
 //!
 //! `load(path, &LoadOptions)` returns a [`Scene`]; every error is a
 //! `diag::Located` (file:line:col with the source line); non-fatal notes
@@ -35,6 +37,8 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod bench;
+pub mod dialect;
+pub mod differences;
 pub mod lexer;
 pub mod paper;
 pub mod params;
@@ -53,6 +57,9 @@ use std::path::{Path, PathBuf};
 pub struct LoadOptions {
     /// Warnings (unsupported features, unused parameters, pbrt-v3 forms) become errors.
     pub strict: bool,
+    /// Read the file as this pbrt version instead of the one its syntax shows
+    /// (see [`dialect`]).
+    pub pbrt_version: Option<dialect::PbrtVersion>,
 }
 
 /// A parsed scene plus what the model does not hold.
@@ -63,9 +70,13 @@ pub struct LoadedScene {
     pub prototypes: Vec<usize>,
     /// Number of `Shape` directives read.
     pub shape_directives: usize,
+    /// The pbrt version the file was read as, and why.
+    pub dialect: dialect::Dialect,
+    /// The wavelength grid a `spectral` film asks for (None: camsim's default).
+    pub spectral_grid: Option<crate::spectrum::WavelengthGrid>,
 }
 
-/// Load a pbrt scene file (v4, or v3 read with its v4 meaning).
+/// Load a pbrt scene file (v4, or v3; see the module docs).
 pub fn load(path: &Path, opts: &LoadOptions) -> Result<Scene> {
     Ok(load_full(path, opts)?.scene)
 }
@@ -81,6 +92,7 @@ pub fn load_full(path: &Path, opts: &LoadOptions) -> Result<LoadedScene> {
 pub fn parse_text(text: &str, path: &Path, opts: &LoadOptions) -> Result<LoadedScene> {
     let base: PathBuf = path.parent().map(|p| p.to_path_buf()).unwrap_or_default();
     let mut p = parser::Parser::new(opts.strict, base);
+    p.ctx.dialect = dialect::decide(text, opts.pbrt_version);
     p.push_source(path.to_path_buf(), text.to_string());
     let r = p.run();
     if let Err(e) = r {
@@ -115,6 +127,8 @@ pub fn parse_text(text: &str, path: &Path, opts: &LoadOptions) -> Result<LoadedS
         scene,
         prototypes: p.prototypes.clone(),
         shape_directives: p.shape_count,
+        dialect: p.ctx.dialect.clone(),
+        spectral_grid: p.film.as_ref().and_then(|f| f.spectral_grid.clone()),
     })
 }
 
@@ -243,7 +257,10 @@ pub fn info_json(l: &LoadedScene) -> serde_json::Value {
         "objects": s.objects.iter().map(|o| o.name.clone()).collect::<Vec<_>>(),
         "camera": camera,
         "film": s.film,
+        "spectral_grid": l.spectral_grid,
         "world_bounds": bounds,
+        "pbrt_version": l.dialect.reason,
+        "differences_from_pbrt": differences::differences_from_pbrt(l),
         "warnings": s.warnings,
     })
 }

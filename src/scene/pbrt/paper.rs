@@ -19,6 +19,14 @@
 //! and is moved by −0.005 m in y (exported at y = 0.305, placed at 0.300 by
 //! `cbBoxCreate`). The exporter's placeholder `distant` light is removed: the paper's
 //! box is lit by its lamp alone.
+//!
+//! A scene without the lamp (the MCC) keeps the exporter's `distant` light,
+//! `rgb L [1 1 1]`. These pbrt-v3 files are now read with pbrt-v3's literal light
+//! meaning (see [`super::dialect`]), which would make that light ∫ȳ = 106.857×
+//! brighter than the pbrt-v4 reading the paper's scenes were always rendered with;
+//! so a kept light that is exactly the pbrt-v3 reading of `rgb L [1 1 1]` gets the
+//! pbrt-v4 value back (the same product, v3 value × 1/∫ȳ, bit for bit), and the
+//! paper's scenes render as before whichever version they are read as.
 
 use crate::diag::{Error, Result};
 use crate::scene::{Emission, Light, Material, Scene};
@@ -30,6 +38,8 @@ pub struct PaperSpectraReport {
     pub materials_replaced: Vec<String>,
     pub lamp_meshes: usize,
     pub lights_removed: usize,
+    /// Placeholder distant lights put back to their pbrt-v4 value (see module docs).
+    pub lights_renormalised: usize,
 }
 
 fn lib(name: &str) -> Result<Spectrum> {
@@ -115,6 +125,22 @@ pub fn apply_paper_spectra(scene: &mut Scene) -> Result<PaperSpectraReport> {
         let before = scene.lights.len();
         scene.lights.retain(|l| !matches!(l, Light::Distant { .. }));
         rep.lights_removed = before - scene.lights.len();
+    }
+    for l in &mut scene.lights {
+        if let Light::Distant { irradiance, .. } = l {
+            let v3 = super::params::rgb_to_spectrum(
+                [1.0; 3],
+                super::params::SpectrumKind::Illuminant,
+                &irradiance.name,
+            )
+            .map_err(Error::invalid)?;
+            if irradiance.values == v3.values && irradiance.wavelengths_nm == v3.wavelengths_nm {
+                *irradiance = irradiance
+                    .clone()
+                    .scaled(1.0 / super::to_scene::luminance_y_of_one());
+                rep.lights_renormalised += 1;
+            }
+        }
     }
     if rep.materials_replaced.is_empty() && rep.lamp_meshes == 0 {
         return Err(Error::invalid(

@@ -57,6 +57,8 @@ pub struct Ctx {
     /// Directory of the top-level scene file (pbrt-v4 resolves relative paths against it).
     pub base_dir: PathBuf,
     pub warnings: Vec<SpanError>,
+    /// The pbrt version the file is read as (light normalisation).
+    pub dialect: super::dialect::Dialect,
 }
 
 impl Ctx {

@@ -161,6 +161,7 @@ impl Parser {
                 strict,
                 base_dir,
                 warnings: vec![],
+                dialect: Default::default(),
             },
             scene: Scene::default(),
             state: GState::default(),

@@ -4,9 +4,12 @@
 //!   (each patch split into two triangles), `loopsubdiv` (one level of Loop
 //!   subdivision, without the limit-surface projection), `sphere` and `disk` (kept
 //!   analytic; tessellated inside object definitions since instances reference
-//!   meshes). Triangles are wound so that their geometric normal is pbrt's: facing
-//!   the shading normals when `N` is given, else flipped by `ReverseOrientation`
-//!   xor a handedness-swapping transform.
+//!   meshes, and a `ReverseOrientation` sphere, which faces inwards, is a 96×48
+//!   mesh), `cylinder` (a mesh of 96 segments per turn, zmin/zmax/phimax honoured).
+//!   Triangles are wound so that their geometric normal is pbrt's: facing
+//!   the shading normals when `N` is given (negated by `ReverseOrientation`, as
+//!   pbrt-v4's TriangleMesh does), else flipped by `ReverseOrientation` xor a
+//!   handedness-swapping transform.
 //! - Materials: `diffuse`/`matte` → Diffuse; `coateddiffuse` → DiffuseSpecular with
 //!   the coating's normal-incidence Fresnel reflectance ((η−1)/(η+1))² as the specular
 //!   term; `uber`/`plastic` (pbrt-v3) → DiffuseSpecular(Kd, Ks); `conductor`/`metal` →
@@ -15,12 +18,13 @@
 //!   `interface` → an index-matched Dielectric (η = 1, light passes unchanged).
 //!   Roughness is converted to the microfacet α: pbrt-v4 `sqrt(r)`, pbrt-v3 its
 //!   polynomial in ln r, when `remaproughness` is true.
-//! - Lights follow pbrt-v4's photometric normalisation: an emission spectrum is
-//!   divided by ∫ȳ(λ)S(λ)dλ (for `rgb`, of the colour space's white only) so that a
-//!   light of `scale` 1 has ∫ȳL dλ = 1, pbrt's "1 nit"; camsim keeps that number in
-//!   W/(sr·m²·nm). `power` (point, spot, area) and `illuminance` (distant, infinite)
-//!   rescale as pbrt-v4 does. pbrt-v3 files get the same v4 meaning. Absolute
-//!   radiometry of the paper's box comes from `apply_paper_spectra`.
+//! - Lights in pbrt-v4 files follow pbrt-v4's photometric normalisation: an emission
+//!   spectrum is divided by ∫ȳ(λ)S(λ)dλ (for `rgb`, of the colour space's white only)
+//!   so that a light of `scale` 1 has ∫ȳL dλ = 1, pbrt's "1 nit"; camsim keeps that
+//!   number in W/(sr·m²·nm). `power` (point, spot, area) and `illuminance` (distant,
+//!   infinite) rescale as pbrt-v4 does. In pbrt-v3 files (decided by the syntax,
+//!   [`super::dialect`]) the spectrum × `scale` is taken literally, as pbrt-v3 does.
+//!   Absolute radiometry of the paper's box comes from `apply_paper_spectra`.
 //! - Camera: `perspective` → Pinhole (lens radius 0) or ThinLens (focal length from the
 //!   film's physical size: `diagonal` mm, default 35, and `fov` across the shorter
 //!   side; N = f/(2·lensradius)); `realistic` → LensFile (lens file path resolved
@@ -73,6 +77,10 @@ pub enum CameraParams {
 pub struct FilmParams {
     pub spec: FilmSpec,
     pub diagonal_mm: f64,
+    /// A `spectral` film's buckets when the file sets `nbuckets`, `lambdamin`
+    /// or `lambdamax` (pbrt-v4 defaults 16, 360, 830 fill the others): one
+    /// band per bucket, at its centre, as pbrt-v4 names its channels.
+    pub spectral_grid: Option<crate::spectrum::WavelengthGrid>,
 }
 
 impl Default for FilmParams {
@@ -87,6 +95,7 @@ impl Default for FilmParams {
                 crop_window: None,
             },
             diagonal_mm: diag,
+            spectral_grid: None,
         }
     }
 }
@@ -278,9 +287,51 @@ pub fn film_params(ty: &str, tspan: Span, p: &ParamList, ctx: &mut Ctx) -> PResu
         pixel_pitch_m: diag * 1e-3 / (w as f64).hypot(h as f64),
         crop_window: crop,
     };
+    let spectral_grid = if ty == "spectral"
+        && ["nbuckets", "lambdamin", "lambdamax"]
+            .iter()
+            .any(|n| p.has(n))
+    {
+        Some(spectral_grid(p, tspan)?)
+    } else {
+        None
+    };
     Ok(FilmParams {
         spec,
         diagonal_mm: diag,
+        spectral_grid,
+    })
+}
+
+/// pbrt-v4's spectral film buckets: `nbuckets` equal buckets over
+/// [`lambdamin`, `lambdamax`], sampled at their centres.
+fn spectral_grid(p: &ParamList, tspan: Span) -> PResult<crate::spectrum::WavelengthGrid> {
+    let n = p.int("nbuckets", 16)?;
+    let lo = p.float("lambdamin", 360.0)?;
+    let hi = p.float("lambdamax", 830.0)?;
+    if !(1..=10_000).contains(&n) {
+        return Err(SpanError::new(
+            p.span_of("nbuckets").unwrap_or(tspan),
+            format!("spectral film nbuckets must be 1..10000, got {n}"),
+        ));
+    }
+    if !(lo > 0.0 && hi.is_finite() && lo < hi) {
+        let at = p
+            .span_of("lambdamin")
+            .or(p.span_of("lambdamax"))
+            .unwrap_or(tspan);
+        return Err(SpanError::new(
+            at,
+            format!(
+                "spectral film needs 0 < lambdamin < lambdamax (nm), got lambdamin {lo}, lambdamax {hi}"
+            ),
+        ));
+    }
+    let step = (hi - lo) / n as f64;
+    Ok(crate::spectrum::WavelengthGrid {
+        start_nm: lo + 0.5 * step,
+        step_nm: step,
+        count: n as usize,
     })
 }
 
@@ -561,7 +612,8 @@ fn photometric(s: &Spectrum) -> f64 {
     luminance_y(s) * luminance_y_of_one()
 }
 
-fn luminance_y_of_one() -> f64 {
+/// ∫ȳ(λ)dλ, 360–830 nm at 1 nm (106.857): pbrt-v4's normaliser of a constant spectrum.
+pub(crate) fn luminance_y_of_one() -> f64 {
     static Y: std::sync::OnceLock<f64> = std::sync::OnceLock::new();
     *Y.get_or_init(|| {
         let grid = crate::spectrum::WavelengthGrid {
@@ -591,7 +643,10 @@ fn emission(
         None => super::params::rgb_to_spectrum([1.0, 1.0, 1.0], SpectrumKind::Illuminant, name)
             .expect("finite white"),
     };
-    let norm = if is_rgb || !p.has(name) {
+    let norm = if ctx.dialect.version == super::dialect::PbrtVersion::V3 {
+        // pbrt-v3: the numbers are the radiance (or intensity) itself.
+        1.0
+    } else if is_rgb || !p.has(name) {
         luminance_y_of_one()
     } else {
         photometric(&s)
@@ -943,18 +998,20 @@ pub fn shape(s: &ShapeInput, ctx: &mut Ctx) -> PResult<Option<Geometry>> {
                     )?;
                 }
             }
+            // camsim's analytic spheres face outwards; a reversed one (facing
+            // inwards, e.g. an enclosing emitter) becomes a fine mesh.
+            if s.reverse_orientation {
+                return Ok(Some(Geometry::Mesh(to_world_mesh(
+                    tessellate_sphere(r, REVERSED_SPHERE_SEGMENTS),
+                    s,
+                ))));
+            }
             if !s.force_mesh {
                 let (scale, uniform) = uniform_scale(&s.to_world);
                 if !uniform {
                     ctx.warn(
                         s.span,
                         "sphere under a non-uniform scale; the mean scale is used",
-                    )?;
-                }
-                if s.reverse_orientation {
-                    ctx.warn(
-                        s.span,
-                        "ReverseOrientation on a sphere ignored (spheres face outwards)",
                     )?;
                 }
                 let radius = r * scale;
@@ -969,7 +1026,32 @@ pub fn shape(s: &ShapeInput, ctx: &mut Ctx) -> PResult<Option<Geometry>> {
                     emission,
                 })));
             }
-            tessellate_sphere(r)
+            tessellate_sphere(r, 48)
+        }
+        "cylinder" => {
+            let r = p.float("radius", 1.0)?;
+            let zmin = p.float("zmin", -1.0)?;
+            let zmax = p.float("zmax", 1.0)?;
+            let phimax = p.float("phimax", 360.0)?;
+            if !(r > 0.0) {
+                return Err(SpanError::new(
+                    s.span,
+                    format!("cylinder radius must be > 0, got {r}"),
+                ));
+            }
+            if !(zmin.is_finite() && zmax.is_finite() && zmin != zmax) {
+                return Err(SpanError::new(
+                    s.span,
+                    format!("cylinder needs finite zmin != zmax, got {zmin} and {zmax}"),
+                ));
+            }
+            if !(phimax > 0.0) {
+                return Err(SpanError::new(
+                    p.span_of("phimax").unwrap_or(s.span),
+                    format!("cylinder phimax must be > 0 degrees, got {phimax}"),
+                ));
+            }
+            tessellate_cylinder(r, zmin, zmax, phimax.min(360.0).to_radians())
         }
         "disk" => {
             let r = p.float("radius", 1.0)?;
@@ -1060,8 +1142,15 @@ fn uniform_scale(m: &DMat4) -> (f64, bool) {
     (mean, uniform)
 }
 
-fn tessellate_sphere(r: f64) -> RawMesh {
-    let (nu, nv) = (48u32, 24u32);
+/// Segments around a `ReverseOrientation` sphere's tessellation (half as
+/// many from pole to pole): the facets lie within r·(1 − cos(π/96)) ≈ 0.05 %
+/// of the sphere.
+pub const REVERSED_SPHERE_SEGMENTS: u32 = 96;
+
+/// A sphere as `nu`×`nu/2` quads (triangles at the poles), outward winding,
+/// smooth normals.
+fn tessellate_sphere(r: f64, nu: u32) -> RawMesh {
+    let nv = nu / 2;
     let mut p = vec![];
     for j in 0..=nv {
         let th = PI * j as f64 / nv as f64;
@@ -1099,6 +1188,39 @@ fn tessellate_sphere(r: f64) -> RawMesh {
     }
 }
 
+/// pbrt's cylinder (side only, no caps): x = r·cos φ, y = r·sin φ, z from
+/// `zmin` to `zmax`, φ up to `phimax` (radians). Facing as pbrt's
+/// ∂p/∂u × ∂p/∂v: outwards when zmax > zmin; smooth normals alike.
+fn tessellate_cylinder(r: f64, zmin: f64, zmax: f64, phimax: f64) -> RawMesh {
+    let nu = ((96.0 * phimax / (2.0 * PI)).ceil() as u32).max(1);
+    let closed = phimax >= 2.0 * PI;
+    let ncol = if closed { nu } else { nu + 1 };
+    let sign = if zmax > zmin { 1.0 } else { -1.0 };
+    let (mut p, mut n) = (vec![], vec![]);
+    for z in [zmin, zmax] {
+        for i in 0..ncol {
+            let ph = phimax * i as f64 / nu as f64;
+            p.push(DVec3::new(r * ph.cos(), r * ph.sin(), z));
+            n.push(DVec3::new(ph.cos(), ph.sin(), 0.0) * sign);
+        }
+    }
+    let mut tri = vec![];
+    for i in 0..nu {
+        let a = i;
+        let b = (i + 1) % ncol;
+        let (c, d) = (a + ncol, b + ncol);
+        // (b−a)×(c−a) has the sign of (zmax − zmin) outwards
+        tri.push([a, b, c]);
+        tri.push([b, d, c]);
+    }
+    RawMesh {
+        p,
+        n: Some(n),
+        uv: None,
+        tri,
+    }
+}
+
 fn tessellate_disk(r: f64, h: f64) -> RawMesh {
     let nu = 64u32;
     let mut p = vec![DVec3::new(0.0, 0.0, h)];
@@ -1128,8 +1250,14 @@ fn to_world_mesh(raw: RawMesh, s: &ShapeInput) -> Mesh {
     } = raw;
     let pw: Vec<DVec3> = p.iter().map(|&q| m.transform_point3(q)).collect();
     drop(p);
-    let nw: Option<Vec<DVec3>> =
-        n.map(|n| n.iter().map(|&v| (nm * v).normalize_or_zero()).collect());
+    // pbrt-v4 (TriangleMesh): ReverseOrientation negates the shading normals
+    // too, and the geometric normal then faces them.
+    let ns = if s.reverse_orientation { -1.0 } else { 1.0 };
+    let nw: Option<Vec<DVec3>> = n.map(|n| {
+        n.iter()
+            .map(|&v| (nm * v).normalize_or_zero() * ns)
+            .collect()
+    });
     let flip_all = s.reverse_orientation ^ swaps;
     let mut area = 0.0;
     // In place: drop degenerate triangles (no area, never hit) and orient the rest.
