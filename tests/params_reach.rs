@@ -121,7 +121,9 @@ impl Case {
             "experiment \"reach\" {{\n    scene \"{ROOT}/scenes/CornellBoxReference/CornellBoxReference.pbrt\"{}\n",
             self.props("scene")
         );
-        for node in ["camera", "lens", "render", "override", "add", "measured", "measure"] {
+        for node in [
+            "camera", "lens", "render", "override", "add", "measured", "measure",
+        ] {
             if let Some(p) = self.nodes.get(node) {
                 s.push_str(&format!("    {node}{}\n", fmt_props(p)));
             }
@@ -138,7 +140,10 @@ impl Case {
         s
     }
     fn props(&self, node: &str) -> String {
-        self.nodes.get(node).map(|p| fmt_props(p)).unwrap_or_default()
+        self.nodes
+            .get(node)
+            .map(|p| fmt_props(p))
+            .unwrap_or_default()
     }
 }
 
@@ -201,16 +206,27 @@ fn setup(schema: &Schema, p: &ParamSpec, c: &mut Case) -> &'static str {
     }
     if let Some(t) = node.strip_prefix("add target=") {
         let target = t.trim_matches('"');
-        c.replace("add", vec![("", "\"t\""), ("target", &format!("\"{target}\""))]);
+        c.replace(
+            "add",
+            vec![("", "\"t\""), ("target", &format!("\"{target}\""))],
+        );
         match target {
             "mesh" if p.name != "file" => c.set("add", "file", "\"scenes/bunny.obj\""),
             "spot-light" => {
                 c.set("add", "position-m", "(0 0.2 0)");
                 c.set("add", "look-at-m", "(0 0 0)");
                 c.set("add", "intensity", "\"cie-a\"");
+                c.set("add", "cone-deg", "60");
             }
             _ => {}
         }
+        // `target` names the schema: its value is the schema's own target
+        let target_value = format!("\"{target}\"");
+        let ex = if p.name == "target" {
+            target_value.as_str()
+        } else {
+            ex
+        };
         c.set("add", p.name, ex);
         return "add";
     }
@@ -220,7 +236,10 @@ fn setup(schema: &Schema, p: &ParamSpec, c: &mut Case) -> &'static str {
         return "override";
     }
     if node.starts_with("measured") {
-        c.replace("measured", vec![("", "\"cap\""), ("file", "\"capture.png\"")]);
+        c.replace(
+            "measured",
+            vec![("", "\"cap\""), ("file", "\"capture.png\"")],
+        );
         match p.name {
             "labels" => c.set("measured", "names", "\"names.txt\""),
             "names" => c.set("measured", "labels", "\"labels.png\""),
@@ -238,8 +257,17 @@ fn setup(schema: &Schema, p: &ParamSpec, c: &mut Case) -> &'static str {
             "mcc" if p.name != "of" => c.set("measure", "of", "\"mcc\""),
             _ => {}
         }
-        if p.name == "input" {
-            c.extra.push("measured \"capture-near\" file=\"capture.png\"".into());
+        if p.name == "input" || (kind == "ri" && p.name == "channel") {
+            c.extra.push(
+                "measured \"capture-near\" file=\"capture.png\" labels=\"labels.png\" names=\"names.txt\""
+                    .into(),
+            );
+            match kind {
+                "sfr" => c.set("measure", "roi-px", "(0 0 2 2)"),
+                "noise" => c.set("measure", "conversion-gain-dv-e", "0.17"),
+                "ri" if p.name == "channel" => c.set("measure", "input", "\"capture-near\""),
+                _ => {}
+            }
         }
         c.set("measure", p.name, ex);
         return "measure";
@@ -260,9 +288,14 @@ fn write_side_files(dir: &Path) {
     let mut e = png::Encoder::new(f, 2, 2);
     e.set_color(png::ColorType::Grayscale);
     e.set_depth(png::BitDepth::Eight);
-    e.write_header().unwrap().write_image_data(&[0, 1, 1, 0]).unwrap();
+    e.write_header()
+        .unwrap()
+        .write_image_data(&[0, 1, 1, 0])
+        .unwrap();
     std::fs::copy(dir.join("capture.png"), dir.join("labels.png")).unwrap();
     std::fs::write(dir.join("names.txt"), "background\nthing\n").unwrap();
+    // relative mesh files (`scenes/bunny.obj`) resolve from the experiment's directory
+    std::os::unix::fs::symlink(Path::new(ROOT).join("scenes"), dir.join("scenes")).unwrap();
 }
 
 fn parse(dir: &Path, text: &str) -> Result<experiment::plan::Plan, String> {
@@ -276,7 +309,10 @@ fn spectrum_is(s: &camsim::spectrum::Spectrum, name: &str) -> bool {
     let r = camsim::spectrum::library::named(name).unwrap();
     s.wavelengths_nm == r.wavelengths_nm
         && s.values.len() == r.values.len()
-        && s.values.iter().zip(&r.values).all(|(a, b)| (a - b).abs() <= 1e-12 * b.abs().max(1e-300))
+        && s.values
+            .iter()
+            .zip(&r.values)
+            .all(|(a, b)| (a - b).abs() <= 1e-12 * b.abs().max(1e-300))
 }
 
 fn num(x: f64) -> Option<Value> {
@@ -307,9 +343,15 @@ fn probe(
         "scene \"FILE\"" => {
             // the paper's spectra replace the pbrt file's placeholder materials
             let scene = stages::build_scene(spec).map_err(e)?;
-            let left = scene.materials.iter().find(|m| m.name == "LeftWall").unwrap();
+            let left = scene
+                .materials
+                .iter()
+                .find(|m| m.name == "LeftWall")
+                .unwrap();
             match &left.material {
-                Material::DiffuseSpecular { diffuse, .. } if spectrum_is(diffuse, "cbox-red-wall") => {
+                Material::DiffuseSpecular { diffuse, .. }
+                    if spectrum_is(diffuse, "cbox-red-wall") =>
+                {
                     text("paper")
                 }
                 _ => text("file"),
@@ -327,11 +369,7 @@ fn probe(
                 // point on that ray at the example's distance
                 "look-at-m" => {
                     let Value::List(l) = &ex else { unreachable!() };
-                    let target = glam::DVec3::new(
-                        num_of(&l[0]),
-                        num_of(&l[1]),
-                        num_of(&l[2]),
-                    );
+                    let target = glam::DVec3::new(num_of(&l[0]), num_of(&l[1]), num_of(&l[2]));
                     v3(eye + fwd * (target - eye).length())
                 }
                 // `up` is orthogonalised against the view: compare directions
@@ -375,9 +413,12 @@ fn probe(
                     let cam = stages::build_camera(spec, &scene).map_err(e)?;
                     num(cam.film_distance_m().unwrap() * 1e3)
                 }
-                (CameraModel::LensFile { focus_distance_m, .. }, "focus-distance-m") => {
-                    focus_distance_m.and_then(num)
-                }
+                (
+                    CameraModel::LensFile {
+                        focus_distance_m, ..
+                    },
+                    "focus-distance-m",
+                ) => focus_distance_m.and_then(num),
                 (CameraModel::LensFile { rtf_fit, .. }, "rtf-degree") => {
                     rtf_fit.map(|f| f.degree as f64).and_then(num)
                 }
@@ -392,9 +433,12 @@ fn probe(
                 (CameraModel::ThinLens { focal_length_m, .. }, "focal-length-mm") => {
                     num(focal_length_m * 1e3)
                 }
-                (CameraModel::ThinLens { focus_distance_m, .. }, "focus-distance-m") => {
-                    num(*focus_distance_m)
-                }
+                (
+                    CameraModel::ThinLens {
+                        focus_distance_m, ..
+                    },
+                    "focus-distance-m",
+                ) => num(*focus_distance_m),
                 _ => None,
             }
         }
@@ -431,7 +475,14 @@ fn probe(
                 (TargetSpec::SlantedEdge(c), "tilt-deg") => num(c.tilt_deg),
                 (TargetSpec::SlantedEdge(c), "reflectance") => spectrum_text(&c.white, &ex),
                 (TargetSpec::Mesh(c), "reflectance") => spectrum_text(&c.reflectance, &ex),
-                (TargetSpec::Light(Light::Spot { position, direction, .. }), "look-at-m") => {
+                (
+                    TargetSpec::Light(Light::Spot {
+                        position,
+                        direction,
+                        ..
+                    }),
+                    "look-at-m",
+                ) => {
                     let Value::List(l) = &ex else { unreachable!() };
                     let t = glam::DVec3::new(num_of(&l[0]), num_of(&l[1]), num_of(&l[2]));
                     v3(*position + *direction * (t - *position).length())
@@ -447,14 +498,18 @@ fn probe(
                 (TargetSpec::Light(Light::Spot { cone_angle_deg, .. }), "cone-deg") => {
                     num(*cone_angle_deg)
                 }
-                (TargetSpec::Light(Light::Spot { falloff_start_deg, .. }), "falloff-start-deg") => {
-                    num(*falloff_start_deg)
-                }
+                (
+                    TargetSpec::Light(Light::Spot {
+                        falloff_start_deg, ..
+                    }),
+                    "falloff-start-deg",
+                ) => num(*falloff_start_deg),
                 _ => None,
             }
         }
         n if n.starts_with("override") => {
-            let o = edits::override_spec(&spec.overrides[0].params, dir).map_err(|x| x.to_string())?;
+            let o =
+                edits::override_spec(&spec.overrides[0].params, dir).map_err(|x| x.to_string())?;
             match p.name {
                 "reflectance" => o.reflectance.as_ref().and_then(|s| spectrum_text(s, &ex)),
                 "radiance" => o.radiance.as_ref().and_then(|s| spectrum_text(s, &ex)),
@@ -464,7 +519,8 @@ fn probe(
         }
         n if n.starts_with("measured") => {
             let m = &spec.measured[0];
-            let file = |f: &Option<experiment::spec::FileRef>| f.as_ref().map(|f| f.written.clone());
+            let file =
+                |f: &Option<experiment::spec::FileRef>| f.as_ref().map(|f| f.written.clone());
             match p.name {
                 "file" => text(&m.file.written),
                 "pixel-um" => m.pixel_um.and_then(num),
@@ -510,7 +566,9 @@ fn spectrum_text(s: &camsim::spectrum::Spectrum, ex: &Value) -> Option<Value> {
 
 /// The line (1-based) and column (1-based, characters) of `needle` in `text`.
 fn line_col(text: &str, needle: &str) -> (usize, usize) {
-    let off = text.find(needle).unwrap_or_else(|| panic!("'{needle}' not in\n{text}"));
+    let off = text
+        .find(needle)
+        .unwrap_or_else(|| panic!("'{needle}' not in\n{text}"));
     let line = text[..off].matches('\n').count() + 1;
     let col = text[..off].rfind('\n').map_or(off, |n| off - n - 1) + 1;
     (line, col)
@@ -575,13 +633,20 @@ fn every_property_reaches_its_stage() {
             let plan = match parse(dir, &text) {
                 Ok(pl) => pl,
                 Err(e) => {
-                    failures.push(format!("{} {}: check failed: {e}\n{text}", schema.node, p.name));
+                    failures.push(format!(
+                        "{} {}: check failed: {e}\n{text}",
+                        schema.node, p.name
+                    ));
                     continue;
                 }
             };
             let spec = &plan.variants[0].variant.spec;
+            let expected = match (schema.node.strip_prefix("add target="), p.name) {
+                (Some(t), "target") => Value::String(t.trim_matches('"').to_string()),
+                _ => parse_example(p.example),
+            };
             match probe(schema, p, spec, dir) {
-                Ok(Some(v)) if same(&parse_example(p.example), &v) => checked += 1,
+                Ok(Some(v)) if same(&expected, &v) => checked += 1,
                 Ok(Some(v)) => failures.push(format!(
                     "{} {}: example {} → the built stage holds {v:?}",
                     schema.node, p.name, p.example
@@ -590,11 +655,19 @@ fn every_property_reaches_its_stage() {
                     "{} {}: no probe (or the value did not arrive)",
                     schema.node, p.name
                 )),
-                Err(e) => failures.push(format!("{} {}: building the stage: {e}", schema.node, p.name)),
+                Err(e) => failures.push(format!(
+                    "{} {}: building the stage: {e}",
+                    schema.node, p.name
+                )),
             }
         }
     }
-    assert!(failures.is_empty(), "{} reached; failures:\n{}", checked, failures.join("\n"));
+    assert!(
+        failures.is_empty(),
+        "{} reached; failures:\n{}",
+        checked,
+        failures.join("\n")
+    );
     assert!(checked >= 100, "only {checked} properties checked");
 }
 
@@ -626,7 +699,10 @@ fn misspelt_and_wrong_typed_properties_fail_check_at_their_line() {
                 Err(e) => {
                     let at = format!("reach.kdl:{line}:{}:", col + 1);
                     if !e.contains(&at) || !e.contains(&bad) {
-                        failures.push(format!("{} '{bad}': not located at {at}:\n{e}", schema.node));
+                        failures.push(format!(
+                            "{} '{bad}': not located at {at}:\n{e}",
+                            schema.node
+                        ));
                     }
                 }
             }
@@ -658,7 +734,8 @@ fn misspelt_and_wrong_typed_properties_fail_check_at_their_line() {
 /// The language reference's tables are `camsim params`'s output.
 #[test]
 fn language_reference_holds_the_generated_tables() {
-    let doc = std::fs::read_to_string(PathBuf::from(ROOT).join("docs/experiment-language.md")).unwrap();
+    let doc =
+        std::fs::read_to_string(PathBuf::from(ROOT).join("docs/experiment-language.md")).unwrap();
     for schema in language::schemas() {
         assert!(
             doc.contains(&schema.markdown()),

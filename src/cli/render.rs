@@ -127,8 +127,10 @@ pub fn render(a: RenderArgs) -> Result<i32> {
         sf.scene.camera.as_ref().ok_or_else(|| {
             Error::invalid(format!("{}: the scene has no camera", a.scene.display()))
         })?;
-    let camera =
-        camsim::optics::radiance::for_film(camsim::optics::camera::build(&spec.model, &film)?, a.film);
+    let camera = camsim::optics::radiance::for_film(
+        camsim::optics::camera::build(&spec.model, &film)?,
+        a.film,
+    );
     let settings = RenderSettings {
         spp: a.spp.or(sf.spp).unwrap_or(64),
         max_bounces: a.max_bounces.or(sf.max_bounces).unwrap_or(6),

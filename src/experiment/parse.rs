@@ -931,6 +931,7 @@ impl P {
                     a.span = e.vspan;
                 }
                 Some((k, ks)) => {
+                    a.spans.insert(k, *ks, e.vspan);
                     let r = match k.as_str() {
                         "target" => {
                             let s = apply::as_str(&e.value, "target")
@@ -972,7 +973,6 @@ impl P {
                         _ => {
                             apply::check_generic(k, &e.value).map_err(|x| self.ae(*ks, x))?;
                             a.params.set(k.clone(), e.value.clone());
-                            a.spans.insert(k, *ks, e.vspan);
                             Ok(())
                         }
                     };
@@ -994,14 +994,6 @@ impl P {
                 ),
             ));
         };
-        if t == Target::Mesh && a.file.is_none() {
-            return Err(self
-                .e(
-                    sp,
-                    format!("'add \"{id}\"' with target=\"mesh\" needs file=\"…\""),
-                )
-                .with_help("e.g. file=\"../scenes/bunny.obj\""));
-        }
         a.id = id;
         a.target = t;
         Ok(a)

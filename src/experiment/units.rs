@@ -84,6 +84,7 @@ pub const DIMENSIONLESS: &[&str] = &[
 /// Words that mark a name as dimensionless when it ends with `-<word>`.
 pub const DIMENSIONLESS_WORDS: &[&str] = &[
     "count",
+    "percentile",
     "ratio",
     "factor",
     "gain",

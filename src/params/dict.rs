@@ -211,11 +211,25 @@ impl<'a> ParamDict<'a> {
         }
     }
 
+    /// Every written property the schema does not list is an error naming the
+    /// accepted ones (call first, so a misspelt required property is reported
+    /// as misspelt, not as missing).
+    pub fn check_names(&self) -> Result<(), ParamError> {
+        self.unread(|k| self.schema.get(k).is_some())
+    }
+
     /// Every written property no look-up read is an error naming the accepted ones.
     pub fn finish(&self) -> Result<(), ParamError> {
-        let used = self.used.borrow();
-        for k in self.params.0.keys() {
-            if !used.contains(k) {
+        let used = self.used.borrow().clone();
+        self.unread(|k| used.contains(k))
+    }
+
+    fn unread(&self, ok: impl Fn(&str) -> bool) -> Result<(), ParamError> {
+        {
+            for k in self.params.0.keys() {
+                if ok(k) {
+                    continue;
+                }
                 let names = self.schema.names();
                 let mut e = ParamError::unknown(k, &names);
                 e.message = format!(

@@ -101,6 +101,7 @@ pub fn camera_model(file: Option<&Path>, params: &Params) -> Result<CameraModel,
 
 fn file_model(path: &Path, params: &Params) -> Result<CameraModel, ParamError> {
     let d = ParamDict::new(params, &LENS_FILE_SCHEMA);
+    d.check_names()?;
     let film_distance_m = d.positive("film-distance-mm")?.map(|mm| mm * 1e-3);
     let focus_distance_m = d.positive("focus-distance-m")?;
     let degree = match d.raw("rtf-degree")? {
@@ -140,6 +141,7 @@ fn file_model(path: &Path, params: &Params) -> Result<CameraModel, ParamError> {
 
 fn inline_model(params: &Params) -> Result<CameraModel, ParamError> {
     let d = ParamDict::new(params, &LENS_MODEL_SCHEMA);
+    d.check_names()?;
     let model = d.choice("model")?.unwrap_or("pinhole");
     let f_number = d.positive("f-number")?.unwrap_or(2.0);
     let fov_deg = d.in_range("fov-deg", f64::MIN_POSITIVE, 179.9)?;

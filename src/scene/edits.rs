@@ -144,6 +144,7 @@ pub struct OverrideSpec {
 /// Read an `override`'s properties (spectra resolved relative to `dir`).
 pub fn override_spec(params: &Params, dir: &Path) -> std::result::Result<OverrideSpec, ParamError> {
     let d = ParamDict::new(params, &OVERRIDE_SCHEMA);
+    d.check_names()?;
     let spectrum = |k: &str| -> std::result::Result<Option<Spectrum>, ParamError> {
         match d.str(k)? {
             Some(r) => library::resolve(r, dir)
@@ -320,7 +321,13 @@ pub static MESH_SCHEMA: Schema = Schema {
     params: &[
         PLACEMENT[0],
         PLACEMENT[1],
-        PLACEMENT[2],
+        spec(
+            "rotate-deg",
+            Kind::Vec3,
+            "(0 0 0)",
+            "rotation about y only: (0 a 0)",
+            "(0 3 0)",
+        ),
         PLACEMENT[3],
         PLACEMENT[4],
         spec(
@@ -424,6 +431,7 @@ pub fn target_spec(
     dir: &Path,
 ) -> std::result::Result<TargetSpec, ParamError> {
     let d = ParamDict::new(params, addition_schema(target));
+    d.check_names()?;
     let pos = DVec3::from_array(at.position_m);
     let rot = DVec3::from_array(at.rotate_deg);
     let spectrum = |k: &str| -> std::result::Result<Option<Spectrum>, ParamError> {
