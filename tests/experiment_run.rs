@@ -371,3 +371,28 @@ fn ctrl_c_stops_after_the_variant_in_flight_and_keeps_results() {
     assert!(stderr(&r).contains("43 done, 5 cached"), "{}", stderr(&r));
     assert_eq!(read_rows(&out.join("many/results.csv")).len(), 48 * 3);
 }
+
+/// Issue 13 item 7: relative paths resolve from the file's directory and its
+/// parents whatever the working directory; an empty directory is an error,
+/// not a silent success.
+#[test]
+fn check_from_inside_experiments_and_run_of_an_empty_dir() {
+    let root = env!("CARGO_MANIFEST_DIR");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_camsim"))
+        .args(["check", "fig07-lsf-mtf.kdl"])
+        .current_dir(std::path::Path::new(root).join("experiments"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let empty = tempfile::tempdir().unwrap();
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_camsim"))
+        .arg("run")
+        .arg(empty.path())
+        .args(["--out"])
+        .arg(empty.path().join("out"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "run of an empty directory exited 0");
+    assert!(err.contains("no experiment files"), "{err}");
+}

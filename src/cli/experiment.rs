@@ -121,6 +121,12 @@ pub fn collect(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
                 .map(|e| e.path())
                 .filter(|x| x.extension().is_some_and(|e| e == "kdl") && x.is_file())
                 .collect();
+            if v.is_empty() {
+                return Err(Error::invalid(format!(
+                    "{}: no experiment files (*.kdl) in this directory",
+                    p.display()
+                )));
+            }
             v.sort();
             out.extend(v);
         } else {
@@ -215,6 +221,7 @@ pub fn run(a: RunArgs) -> Result<i32> {
         interrupted: interrupted.clone(),
     };
     let mut code = 0;
+    let mut ran = 0;
     let mut names: std::collections::BTreeMap<String, PathBuf> = Default::default();
     let mut bar = Bar {
         bar: None,
@@ -244,6 +251,7 @@ pub fn run(a: RunArgs) -> Result<i32> {
             code = 1;
             continue;
         }
+        ran += 1;
         match experiment::run::run_parsed(&parsed, &opts, &mut bar) {
             Ok(s) => {
                 eprintln!(
@@ -271,6 +279,10 @@ pub fn run(a: RunArgs) -> Result<i32> {
                 code = code.max(1);
             }
         }
+    }
+    if ran == 0 && code == 0 {
+        eprintln!("no experiment to run: the files given hold only setups");
+        code = 1;
     }
     Ok(code)
 }

@@ -222,10 +222,20 @@ pub fn resolve_ref(
     if w.is_absolute() {
         return loader.exists(w).then(|| w.to_path_buf());
     }
-    base_dir
+    let found = base_dir
         .ancestors()
         .map(|d| d.join(w))
-        .find(|p| loader.exists(p))
+        .find(|p| loader.exists(p));
+    // A file named relative to the working directory (`camsim check x.kdl`
+    // inside `experiments/`) has an empty or relative directory whose parents
+    // are not listed: look again from its absolute form.
+    found.or_else(|| {
+        let abs = std::path::absolute(base_dir).ok()?;
+        (abs != base_dir).then_some(())?;
+        abs.ancestors()
+            .map(|d| d.join(w))
+            .find(|p| loader.exists(p))
+    })
 }
 
 /// Resolve and check a file reference relative to `base_dir` (see [`resolve_ref`]).
@@ -403,7 +413,7 @@ pub fn apply(
         }
         ["measure", name, key] => {
             if *key == "input" {
-                super::measured::check_input_name(spec, as_str(v, "input")?)?;
+                check_input_name(spec, as_str(v, "input")?)?;
             }
             let Some(m) = spec.measures.iter_mut().find(|m| m.name == *name) else {
                 let names: Vec<&str> = spec.measures.iter().map(|m| m.name.as_str()).collect();
@@ -487,4 +497,27 @@ pub fn check_camera(c: &super::spec::CameraSection) -> R<()> {
         );
     }
     Ok(())
+}
+
+/// The measured input called `name`, or an error with a did-you-mean.
+pub fn check_input_name<'a>(
+    spec: &'a ResolvedExperiment,
+    name: &str,
+) -> Result<&'a super::spec::MeasuredInput, ApplyError> {
+    if let Some(c) = spec.measured_input(name) {
+        return Ok(c);
+    }
+    let names: Vec<&str> = spec.measured.iter().map(|c| c.name.as_str()).collect();
+    let mut e = ApplyError::new(if names.is_empty() {
+        format!("unknown measured input '{name}': the experiment names no captured images")
+    } else {
+        format!(
+            "unknown measured input '{name}'; expected one of: {}",
+            names.join(", ")
+        )
+    });
+    e.help = crate::diag::did_you_mean(name, names.iter().copied())
+        .map(|s| format!("did you mean '{s}'?"))
+        .or_else(|| Some(format!("add measured \"{name}\" file=\"captures/….png\"")));
+    Err(e)
 }

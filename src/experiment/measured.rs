@@ -34,7 +34,7 @@
 //!   standard error collapses with the noise, not as t^(−½)); they get a
 //!   `<q>/clipped_fraction` figure instead.
 
-use super::apply::ApplyError;
+use super::apply::{ApplyError, check_input_name};
 use super::source::Span;
 use super::spec::{Measure, MeasuredInput, ResolvedExperiment};
 use super::stages;
@@ -54,29 +54,6 @@ use std::time::Instant;
 pub const INPUT_KINDS: &[&str] = &["sfr", "mcc", "profile", "noise", "ri"];
 /// Measurement kinds whose figures convergence can follow.
 const CONVERGENCE_KINDS: &[&str] = &["sfr", "mcc", "profile", "noise", "ri"];
-
-/// The measured input called `name`, or an error with a did-you-mean.
-pub fn check_input_name<'a>(
-    spec: &'a ResolvedExperiment,
-    name: &str,
-) -> Result<&'a MeasuredInput, ApplyError> {
-    if let Some(c) = spec.measured_input(name) {
-        return Ok(c);
-    }
-    let names: Vec<&str> = spec.measured.iter().map(|c| c.name.as_str()).collect();
-    let mut e = ApplyError::new(if names.is_empty() {
-        format!("unknown measured input '{name}': the experiment names no captured images")
-    } else {
-        format!(
-            "unknown measured input '{name}'; expected one of: {}",
-            names.join(", ")
-        )
-    });
-    e.help = crate::diag::did_you_mean(name, names.iter().copied())
-        .map(|s| format!("did you mean '{s}'?"))
-        .or_else(|| Some(format!("add measured \"{name}\" file=\"captures/….png\"")));
-    Err(e)
-}
 
 /// The directory a measurement's relative files are resolved against.
 fn base_dir(spec: &ResolvedExperiment) -> &Path {

@@ -20,7 +20,7 @@ pub struct ColorimetryOptions {
 pub static SCHEMA: Schema = Schema {
     node: "measure \"colorimetry\"",
     params: &[
-        super::request::name_param(),
+        super::shared_params::name_param(),
         ParamSpec {
             name: "spectrum",
             kind: Kind::Spectrum,

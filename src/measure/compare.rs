@@ -27,8 +27,8 @@ pub struct CompareOptions {
 pub static SCHEMA: crate::params::Schema = crate::params::Schema {
     node: "measure \"compare\"",
     params: &[
-        super::request::name_param(),
-        super::request::of_param(
+        super::shared_params::name_param(),
+        super::shared_params::of_param(
             "the (simulated) measurement whose figures are compared (required; one)",
             "\"mcc-far\"",
         ),
@@ -61,8 +61,8 @@ pub fn from_params(
     d: &crate::params::ParamDict,
 ) -> std::result::Result<CompareOptions, ParamError> {
     Ok(CompareOptions {
-        reference: super::request::nonempty(d, "reference")?,
-        quantity: super::request::nonempty(d, "quantity")?,
+        reference: super::shared_params::nonempty(d, "reference")?,
+        quantity: super::shared_params::nonempty(d, "quantity")?,
         normalize_mean: d.choice("normalize")? == Some("mean"),
     })
 }

@@ -28,8 +28,8 @@ pub struct ConvergenceOptions {
 pub static SCHEMA: crate::params::Schema = crate::params::Schema {
     node: "measure \"convergence\"",
     params: &[
-        super::request::name_param(),
-        super::request::of_param(
+        super::shared_params::name_param(),
+        super::shared_params::of_param(
             "the rendered measurement (sfr, mcc, profile, noise or ri) whose figures are followed (required; one)",
             "\"sfr-near\"",
         ),
@@ -86,7 +86,7 @@ pub fn from_params(
     Ok(ConvergenceOptions {
         spp,
         reference_spp: d.int("reference-spp", 1, 1_000_000_000)?,
-        quantity: super::request::nonempty(d, "quantity")?,
+        quantity: super::shared_params::nonempty(d, "quantity")?,
     })
 }
 

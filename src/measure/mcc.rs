@@ -98,12 +98,12 @@ impl Default for MccRequest {
 pub static SCHEMA: crate::params::Schema = crate::params::Schema {
     node: "measure \"mcc\"",
     params: &[
-        super::request::name_param(),
-        super::request::of_param(
+        super::shared_params::name_param(),
+        super::shared_params::of_param(
             "the chart object whose patches (`<chart>/patch-1` … `-24`) are read; default \"mcc\"",
             "\"chart-far\"",
         ),
-        super::request::input_param(),
+        super::shared_params::input_param(),
         ParamSpec {
             name: "inset-fraction",
             kind: Kind::Number,
@@ -126,7 +126,7 @@ pub fn from_params(d: &crate::params::ParamDict) -> std::result::Result<MccReque
         }
         r.inset_fraction = x;
     }
-    r.input = super::request::nonempty(d, "input")?;
+    r.input = super::shared_params::nonempty(d, "input")?;
     Ok(r)
 }
 

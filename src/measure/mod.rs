@@ -12,6 +12,7 @@
 pub mod colorimetry;
 pub mod compare;
 pub mod convergence;
+pub mod inputs;
 pub mod io;
 pub mod mcc;
 pub mod noise;
@@ -20,6 +21,7 @@ pub mod profile;
 pub mod request;
 pub mod ri;
 pub mod sfr;
+pub mod shared_params;
 pub mod stats;
 
 pub use request::{MeasureOptions, options};

@@ -82,8 +82,8 @@ pub struct NoiseRequest {
 pub static SCHEMA: crate::params::Schema = crate::params::Schema {
     node: "measure \"noise\"",
     params: &[
-        super::request::name_param(),
-        super::request::input_param(),
+        super::shared_params::name_param(),
+        super::shared_params::input_param(),
         ParamSpec {
             name: "channel",
             kind: Kind::Choice(&["r", "g", "b"]),
@@ -191,8 +191,8 @@ pub fn from_params(d: &crate::params::ParamDict) -> std::result::Result<NoiseReq
         options: o,
         seed: d.int("seed", 0, 1 << 53)?,
         conversion_gain_dv_per_e: d.positive("conversion-gain-dv-e")?,
-        roi_px: super::request::roi_px(d, "roi-px")?,
-        input: super::request::nonempty(d, "input")?,
+        roi_px: super::shared_params::roi_px(d, "roi-px")?,
+        input: super::shared_params::nonempty(d, "input")?,
     })
 }
 

@@ -53,12 +53,12 @@ pub struct ProfileRequest {
 pub static SCHEMA: crate::params::Schema = crate::params::Schema {
     node: "measure \"profile\"",
     params: &[
-        super::request::name_param(),
-        super::request::of_param(
+        super::shared_params::name_param(),
+        super::shared_params::of_param(
             "the object(s) the line runs through (more as arguments); the line crosses the centroid of their pixels and spans their bounding box",
             "\"mcc/patch-19\"",
         ),
-        super::request::input_param(),
+        super::shared_params::input_param(),
         ParamSpec {
             name: "band-px",
             kind: Kind::Integer,
@@ -133,7 +133,7 @@ pub fn from_params(
     }
     Ok(ProfileRequest {
         options: o,
-        input: super::request::nonempty(d, "input")?,
+        input: super::shared_params::nonempty(d, "input")?,
     })
 }
 

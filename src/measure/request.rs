@@ -17,46 +17,11 @@ use super::plane::Plane;
 use super::profile::ProfileRequest;
 use super::ri::RiRequest;
 use super::sfr::SfrRequest;
-use crate::image::SensorImage;
-use crate::optical_image::{OpticalImage, Rect};
-use crate::params::{Kind, ParamDict, ParamError, ParamSpec, Params, Schema, Value};
-use crate::spectrum::WavelengthGrid;
+use crate::params::{ParamDict, ParamError, Params, Schema, Value};
 use crate::{Error, Result};
-use std::collections::BTreeMap;
 use std::path::Path;
 
-/// `name=`: the measurement's name in results (read by the experiment layer).
-pub const fn name_param() -> ParamSpec {
-    ParamSpec {
-        name: "name",
-        kind: Kind::Text,
-        default: "the kind",
-        doc: "the measurement's name in results.csv and in other measurements' of=/reference= (unique per experiment; no '.' or ',')",
-        example: "\"m-probe\"",
-    }
-}
-
-/// `of=`: what the measurement reads (read by the experiment layer).
-pub const fn of_param(doc: &'static str, example: &'static str) -> ParamSpec {
-    ParamSpec {
-        name: "of",
-        kind: Kind::Text,
-        default: "",
-        doc,
-        example,
-    }
-}
-
-/// `input=`: a captured image instead of the simulated sensor image.
-pub const fn input_param() -> ParamSpec {
-    ParamSpec {
-        name: "input",
-        kind: Kind::Text,
-        default: "",
-        doc: "read the captured image of the `measured \"<input>\"` node instead of the simulated sensor image (no render)",
-        example: "\"capture-near\"",
-    }
-}
+pub use super::shared_params::{input_param, name_param, nonempty, of_param, roi_px};
 
 /// The kinds of `measure "<kind>"`, in the order of the language reference.
 pub const KINDS: &[&str] = &[
@@ -213,99 +178,7 @@ pub fn needs(kind: &str) -> Needs {
     }
 }
 
-/// `roi-px=(x y w h)`: non-negative whole numbers, w and h ≥ 1.
-pub fn roi_px(d: &ParamDict, name: &str) -> Result<Option<Rect>, ParamError> {
-    let Some(v) = d.f64s(name)? else {
-        return Ok(None);
-    };
-    let bad = || {
-        ParamError::value(
-            name,
-            format!(
-                "'{name}': expected (x y w h), four whole pixel numbers ≥ 0 with w, h ≥ 1, found ({})",
-                v.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(" ")
-            ),
-        )
-        .with_help("e.g. roi-px=(100 80 64 128): left, top, width, height")
-    };
-    if v.len() != 4
-        || v.iter()
-            .any(|x| *x < 0.0 || x.fract() != 0.0 || *x > u32::MAX as f64)
-        || v[2] < 1.0
-        || v[3] < 1.0
-    {
-        return Err(bad());
-    }
-    Ok(Some(Rect::new(
-        v[0] as u32,
-        v[1] as u32,
-        v[2] as u32,
-        v[3] as u32,
-    )))
-}
-
-/// A `Text` property that may not be empty.
-pub fn nonempty(d: &ParamDict, name: &str) -> Result<Option<String>, ParamError> {
-    match d.str(name)? {
-        Some("") => Err(ParamError::value(
-            name,
-            format!("'{name}' must not be empty"),
-        )),
-        o => Ok(o.map(str::to_string)),
-    }
-}
-
-/// The images and choices of the render stage a measurement reads.
-pub struct Inputs<'a> {
-    pub oi: Option<&'a OpticalImage>,
-    pub si: Option<&'a SensorImage>,
-    /// Per measured object, the film rectangle (full-frame pixels) the render
-    /// stage chose for it.
-    pub object_rects: &'a BTreeMap<String, Rect>,
-    /// The variant's render seed (noise regions are drawn with it unless
-    /// `seed=` is given).
-    pub seed: u64,
-    /// The variant's wavelength grid (colorimetry's default).
-    pub grid: &'a WavelengthGrid,
-}
-
-/// A full-frame rectangle in window pixels of an image whose window is `w`.
-pub fn to_window(r: Rect, w: Rect, what: &str) -> Result<Rect> {
-    let x0 = r.x.max(w.x);
-    let y0 = r.y.max(w.y);
-    let x1 = (r.x + r.w).min(w.x + w.w);
-    let y1 = (r.y + r.h).min(w.y + w.h);
-    if x1 <= x0 || y1 <= y0 {
-        return Err(Error::invalid(format!(
-            "{what} (x {} y {} w {} h {}) is outside the rendered window (x {} y {} w {} h {})",
-            r.x, r.y, r.w, r.h, w.x, w.y, w.w, w.h
-        )));
-    }
-    Ok(Rect::new(x0 - w.x, y0 - w.y, x1 - x0, y1 - y0))
-}
-
-/// Bounding box (window pixels) of the pixels labelled `name` or below it
-/// (`name/…`); None when no pixel carries it.
-pub fn label_box(labels: &[u32], names: &[String], w: u32, h: u32, name: &str) -> Option<Rect> {
-    let ids: Vec<u32> = names
-        .iter()
-        .enumerate()
-        .filter(|(_, n)| *n == name || n.strip_prefix(name).is_some_and(|r| r.starts_with('/')))
-        .map(|(i, _)| i as u32)
-        .collect();
-    let (mut x0, mut y0, mut x1, mut y1) = (u32::MAX, u32::MAX, 0u32, 0u32);
-    for y in 0..h {
-        for x in 0..w {
-            if ids.contains(&labels[(y * w + x) as usize]) {
-                x0 = x0.min(x);
-                y0 = y0.min(y);
-                x1 = x1.max(x + 1);
-                y1 = y1.max(y + 1);
-            }
-        }
-    }
-    (x0 != u32::MAX).then(|| Rect::new(x0, y0, x1 - x0, y1 - y0))
-}
+pub use super::inputs::{Inputs, label_box, to_window};
 
 /// Run measurement `name` (of the objects `of`) on a variant's rendered
 /// images. `compare` and `convergence` combine other measurements and are run

@@ -67,8 +67,8 @@ pub struct RiRequest {
 pub static SCHEMA: crate::params::Schema = crate::params::Schema {
     node: "measure \"ri\"",
     params: &[
-        super::request::name_param(),
-        super::request::input_param(),
+        super::shared_params::name_param(),
+        super::shared_params::input_param(),
         ParamSpec {
             name: "bin-count",
             kind: Kind::Integer,
@@ -109,7 +109,7 @@ pub fn from_params(d: &crate::params::ParamDict) -> std::result::Result<RiReques
         bins: d.int("bin-count", 1, 10_000)?.map_or(20, |k| k as usize),
         channel: d.choice("channel")?.map(str::to_string),
         center_px,
-        input: super::request::nonempty(d, "input")?,
+        input: super::shared_params::nonempty(d, "input")?,
     })
 }
 

@@ -945,12 +945,12 @@ pub struct SfrRequest {
 pub static SCHEMA: crate::params::Schema = crate::params::Schema {
     node: "measure \"sfr\"",
     params: &[
-        super::request::name_param(),
-        super::request::of_param(
+        super::shared_params::name_param(),
+        super::shared_params::of_param(
             "the slanted-edge object whose edge is measured (more as arguments: `\"edge-near\" \"edge-far\"`); figures are prefixed `<object>/` (`roi/` with roi-px alone, the input's name on a capture)",
             "\"edge-far\"",
         ),
-        super::request::input_param(),
+        super::shared_params::input_param(),
         ParamSpec {
             name: "channel",
             kind: Kind::Choice(&["lum", "r", "g", "b"]),
@@ -1031,8 +1031,8 @@ pub fn from_params(d: &crate::params::ParamDict) -> std::result::Result<SfrReque
     }
     Ok(SfrRequest {
         options: o,
-        roi_px: super::request::roi_px(d, "roi-px")?,
-        input: super::request::nonempty(d, "input")?,
+        roi_px: super::shared_params::roi_px(d, "roi-px")?,
+        input: super::shared_params::nonempty(d, "input")?,
     })
 }
 
@@ -1056,7 +1056,7 @@ pub fn run_on_sensor(
     of: &[String],
     r: &SfrRequest,
     si: &crate::image::SensorImage,
-    inp: &super::request::Inputs,
+    inp: &super::inputs::Inputs,
 ) -> Result<Measured> {
     let plane = Plane::from_sensor(si)?;
     let opts = SfrOptions {
@@ -1074,7 +1074,7 @@ pub fn run_on_sensor(
         let label = of.first().map(String::as_str).unwrap_or("roi");
         regions.push((
             label.to_string(),
-            super::request::to_window(roi, si.window, "roi-px")?,
+            super::inputs::to_window(roi, si.window, "roi-px")?,
         ));
     } else {
         if of.is_empty() {
@@ -1087,10 +1087,10 @@ pub fn run_on_sensor(
             // pixels → window pixels); without one, the strip of its label box.
             let roi = match inp.object_rects.get(obj) {
                 Some(rect) => {
-                    super::request::to_window(*rect, si.window, &format!("object '{obj}'"))?
+                    super::inputs::to_window(*rect, si.window, &format!("object '{obj}'"))?
                 }
                 None => edge_strip(
-                    super::request::label_box(
+                    super::inputs::label_box(
                         &si.labels,
                         &si.label_names,
                         si.width(),

@@ -136,12 +136,17 @@ impl PinholeEquivalent {
         let up = m.transform_vector3(DVec3::Y) * (2.0 * self.tan_half_height);
         format!(
             "camera {{ perspective location {} direction {} right {} up {} }}",
-            super::export::pov_vec(loc),
-            super::export::pov_vec(dir),
-            super::export::pov_vec(right),
-            super::export::pov_vec(up)
+            pov_vec(loc),
+            pov_vec(dir),
+            pov_vec(right),
+            pov_vec(up)
         )
     }
+}
+
+/// A POV-Ray vector with every digit of the f64 (shortest round-trip form).
+pub(crate) fn pov_vec(p: glam::DVec3) -> String {
+    format!("<{:?},{:?},{:?}>", p.x, p.y, p.z)
 }
 
 #[cfg(test)]

@@ -19,6 +19,7 @@
 //! frame and camsim's are both left-handed with y up, and the camera is
 //! written as explicit vectors, so no convention is translated.
 
+use super::camera::pov_vec;
 use crate::scene::{CameraModel, FilmSpec, Material, MaterialId, ObjectId, Scene};
 use crate::spectrum::color::reflectance_to_linear_srgb;
 use crate::{Error, Result};
@@ -36,11 +37,6 @@ fn material_rgb(m: &Material) -> [f64; 3] {
         Material::Black => [0.0, 0.0, 0.0],
     };
     c.map(|v| v.clamp(0.0, 1.0))
-}
-
-/// A POV-Ray vector with every digit of the f64 (shortest round-trip form).
-pub(crate) fn pov_vec(p: DVec3) -> String {
-    format!("<{:?},{:?},{:?}>", p.x, p.y, p.z)
 }
 
 fn v(p: DVec3) -> String {

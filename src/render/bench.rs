@@ -72,8 +72,8 @@
 //!   is ≤ 0.5 and early roulette kills most indirect paths.
 
 use super::RenderSettings;
+use super::accel::BvhKind;
 use super::film::render_world;
-use super::geometry::BvhKind;
 use super::world::World;
 use crate::optical_image::OpticalImage;
 use crate::optics::pinhole::Pinhole;

@@ -29,10 +29,8 @@
 //! BVH2 leaves hold ≤ 2 primitives (collapse cost 1), ~15 % faster than
 //! obvhs' default of 8 here.
 
-use glam::{Vec3, Vec3A};
-use obvhs::{
-    Boundable, BvhBuildParams, aabb::Aabb, bvh2::Bvh2, cwbvh::CwBvh, ray::Ray, ray::RayHit,
-};
+use glam::Vec3;
+use obvhs::{Boundable, aabb::Aabb};
 
 const EPS32: f32 = f32::EPSILON * 0.5;
 
@@ -391,128 +389,6 @@ pub fn offset_ray_origin(p: Vec3, p_err: Vec3, n: Vec3, w: Vec3) -> Vec3 {
         }
     }
     po
-}
-
-/// Which BVH layout to build.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum BvhKind {
-    Bvh2,
-    Cwbvh,
-    /// 4-wide SSE BVH (`bvh4.rs`), the renderer's default; falls back to
-    /// BVH2 for a tree too deep for its fixed traversal stack.
-    Bvh4,
-}
-
-enum Tree {
-    Four(super::bvh4::Bvh4),
-    Two(Bvh2),
-    Cw(CwBvh),
-    Empty,
-}
-
-/// The acceleration structure over a list of shapes.
-pub struct Accel {
-    pub shapes: Vec<Shape>,
-    tree: Tree,
-}
-
-/// Closest hit: primitive index (into `shapes`) and the primitive hit.
-#[derive(Clone, Copy, Debug)]
-pub struct Hit {
-    pub prim: u32,
-    pub h: PrimHit,
-}
-
-impl Accel {
-    pub fn build(shapes: Vec<Shape>, kind: BvhKind) -> Self {
-        if shapes.is_empty() {
-            return Accel {
-                shapes,
-                tree: Tree::Empty,
-            };
-        }
-        let mut t = std::time::Duration::ZERO;
-        // Small leaves: the watertight triangle test is dearer than a node test
-        // (measured on the Mitsuba Cornell box: leaves of ≤ 2 with collapse cost 1
-        // beat obvhs' default 8 / 3.0 by ~15 %).
-        let mut params = BvhBuildParams::medium_build();
-        params.max_prims_per_leaf = 2;
-        params.collapse_traversal_cost = 1.0;
-        let tree = match kind {
-            BvhKind::Bvh4 => match super::bvh4::Bvh4::build(&shapes) {
-                Some(b) => Tree::Four(b),
-                None => Tree::Two(obvhs::bvh2::builder::build_bvh2(&shapes, params, &mut t)),
-            },
-            BvhKind::Bvh2 => Tree::Two(obvhs::bvh2::builder::build_bvh2(&shapes, params, &mut t)),
-            BvhKind::Cwbvh => Tree::Cw(obvhs::cwbvh::builder::build_cwbvh(&shapes, params, &mut t)),
-        };
-        Accel { shapes, tree }
-    }
-
-    /// Closest hit along `o + t·d`, t ∈ (0, tmax).
-    #[inline]
-    pub fn intersect(&self, o: Vec3, d: Vec3, tmax: f32) -> Option<Hit> {
-        if let Tree::Four(b) = &self.tree {
-            return b
-                .intersect(&self.shapes, o, d, tmax)
-                .map(|(prim, h)| Hit { prim, h });
-        }
-        let ray = Ray::new(Vec3A::from(o), Vec3A::from(d), 0.0, tmax);
-        let mut best = PrimHit {
-            t: tmax,
-            b: [0.0; 3],
-        };
-        let mut best_prim = u32::MAX;
-        let mut hit = RayHit::none();
-        let shapes = &self.shapes;
-        let tr = TriRay::new(o, d);
-        let mut f = |r: &Ray, idx: usize, indices: &[u32]| -> f32 {
-            let prim = indices[idx];
-            match shapes[prim as usize].intersect_pre(&tr, d, r.tmax) {
-                Some(h) if h.t < best.t => {
-                    best = h;
-                    best_prim = prim;
-                    h.t
-                }
-                _ => f32::INFINITY,
-            }
-        };
-        match &self.tree {
-            Tree::Two(b) => {
-                b.ray_traverse(ray, &mut hit, |r, i| f(r, i, &b.primitive_indices));
-            }
-            Tree::Cw(b) => {
-                b.ray_traverse(ray, &mut hit, |r, i| f(r, i, &b.primitive_indices));
-            }
-            Tree::Empty | Tree::Four(_) => {}
-        }
-        (best_prim != u32::MAX).then_some(Hit {
-            prim: best_prim,
-            h: best,
-        })
-    }
-
-    /// True when nothing blocks `o + t·d` for t ∈ (0, tmax).
-    #[inline]
-    pub fn unoccluded(&self, o: Vec3, d: Vec3, tmax: f32) -> bool {
-        if let Tree::Four(b) = &self.tree {
-            return b.unoccluded(&self.shapes, o, d, tmax);
-        }
-        let ray = Ray::new(Vec3A::from(o), Vec3A::from(d), 0.0, tmax);
-        let shapes = &self.shapes;
-        let tr = TriRay::new(o, d);
-        let f = |r: &Ray, idx: usize, indices: &[u32]| -> f32 {
-            match shapes[indices[idx] as usize].intersect_pre(&tr, d, r.tmax) {
-                Some(h) => h.t,
-                None => f32::INFINITY,
-            }
-        };
-        match &self.tree {
-            Tree::Two(b) => b.ray_traverse_miss(ray, |r, i| f(r, i, &b.primitive_indices)),
-            Tree::Cw(b) => b.ray_traverse_miss(ray, |r, i| f(r, i, &b.primitive_indices)),
-            Tree::Empty | Tree::Four(_) => true,
-        }
-    }
 }
 
 #[cfg(test)]

@@ -56,6 +56,7 @@
 // `!(x > 0.0)` is deliberate throughout: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod accel;
 pub mod bench;
 pub mod bsdf;
 pub mod bvh4;
@@ -73,7 +74,7 @@ use crate::scene::{FilmSpec, Scene};
 use crate::spectrum::WavelengthGrid;
 use serde::{Deserialize, Serialize};
 
-pub use geometry::BvhKind;
+pub use accel::BvhKind;
 pub use world::World;
 
 /// Render settings.

@@ -5,8 +5,9 @@
 //! Instances are flattened into world-space triangles. A mesh referenced by any
 //! instance is treated as a prototype only and is not rendered by itself.
 
+use super::accel::{Accel, BvhKind};
 use super::bsdf::{Bsdf, mean};
-use super::geometry::{Accel, BvhKind, HIT_POINT_GAMMA, PrimHit, Shape, triangle_point};
+use super::geometry::{HIT_POINT_GAMMA, PrimHit, Shape, triangle_point};
 use super::sampling::{Frame, sample_cdf, uniform_sphere, uniform_triangle};
 use crate::scene::{Emission, Light, Material, Scene};
 use crate::spectrum::{Spectrum, WavelengthGrid};

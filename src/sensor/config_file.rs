@@ -12,7 +12,7 @@
 
 use super::config::SensorConfig;
 use super::relative_illumination::parse_ri;
-use super::sensor_params::{SCHEMA, set_property};
+use super::sensor_params::{BLOCK_NAMES, SCHEMA, set_property};
 use crate::diag::{Error, Located, did_you_mean};
 use crate::params::{ParamDict, Params, Value};
 use crate::spectrum::library;
@@ -20,7 +20,6 @@ use kdl::{KdlDocument, KdlNode, KdlValue};
 use std::path::Path;
 
 /// Block node names (files only).
-pub const BLOCK_NAMES: &[&str] = &["qe", "qe-matrix", "relative-illumination"];
 
 /// Suggestion text for an unknown name: a missing unit is called out explicitly.
 fn suggestion(word: &str, names: &[&str]) -> Option<String> {

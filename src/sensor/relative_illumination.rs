@@ -6,8 +6,6 @@ use crate::diag::{Error, Located, did_you_mean};
 use kdl::{KdlNode, KdlValue};
 use std::path::Path;
 
-use super::config_file::loc;
-
 /// Pixel/microlens relative illumination applied at the sensor (issue 5 item 4),
 /// as a function of image-side field height from the sensor centre.
 #[derive(Clone, Debug, PartialEq)]
@@ -294,6 +292,11 @@ pub fn read_ri_csv(p: &Path) -> Result<(Vec<f64>, Vec<f64>), String> {
         v.push(g(vi)?);
     }
     Ok((h, v))
+}
+
+/// A located error in a sensor file.
+fn loc(path: &Path, text: &str, span: miette::SourceSpan, msg: String) -> crate::diag::Error {
+    crate::diag::Located::at_offset(path, text, span.offset(), span.len(), msg).into()
 }
 
 #[cfg(test)]

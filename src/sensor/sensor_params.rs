@@ -8,11 +8,13 @@
 //! [`SensorConfig`] everything is SI (metres, volts, fractions).
 
 use super::config::{ConversionGain, Exposure, SensorConfig, UNITY_GAIN_ISO};
-use super::config_file::BLOCK_NAMES;
 use crate::image::CfaPattern;
 use crate::params::{Kind, ParamDict, ParamError, ParamSpec, Params, Schema, Value};
 use crate::spectrum::library;
 use std::path::Path;
+
+/// Block nodes of a sensor file (not settable inline).
+pub const BLOCK_NAMES: &[&str] = &["qe", "qe-matrix", "relative-illumination"];
 
 const fn spec(
     name: &'static str,
