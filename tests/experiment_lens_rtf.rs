@@ -109,7 +109,7 @@ fn bad_rtf_degree_values_are_reported() {
         ),
         (
             format!(r#"lens "{dgauss}" rtf-degree=5 rtf-axis-weight=-1"#),
-            "'rtf-axis-weight' must be a positive number",
+            "'rtf-axis-weight' must be > 0",
         ),
         (
             format!(r#"lens "{dgauss}" rtf-degre="none""#),

@@ -103,7 +103,7 @@ const CASES: &[(&str, &str, &str)] = &[
     (
         "lens-model-unknown-property.kdl",
         "lens-model-unknown-property.kdl:2:37",
-        "unknown property 'film-distance-mm'; expected one of: model, fov-deg",
+        "unknown property 'film-distance-mm' on lens model=…; expected one of: model, fov-deg",
     ),
     (
         "lens-rtf-degree-fraction.kdl",
@@ -117,7 +117,7 @@ const CASES: &[(&str, &str, &str)] = &[
     ),
     (
         "mesh-without-file.kdl",
-        "mesh-without-file.kdl:2:5",
+        "mesh-without-file.kdl:2:9",
         "needs file=",
     ),
     (

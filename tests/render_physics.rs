@@ -452,7 +452,8 @@ fn millimetre_and_kilometre_scenes_stay_finite_and_agree() {
 
 #[test]
 fn spawned_rays_never_reintersect_their_surface_at_any_scale() {
-    use camsim::render::geometry::{Accel, BvhKind, Shape, offset_ray_origin};
+    use camsim::render::accel::{Accel, BvhKind};
+    use camsim::render::geometry::{Shape, offset_ray_origin};
     use camsim::render::sampling::Rng;
     use glam::Vec3;
     for scale in [1e-3f32, 1.0, 1e3] {

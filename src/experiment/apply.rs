@@ -230,8 +230,12 @@ pub fn resolve_ref(
     // inside `experiments/`) has an empty or relative directory whose parents
     // are not listed: look again from its absolute form.
     found.or_else(|| {
-        let abs = std::path::absolute(base_dir).ok()?;
-        (abs != base_dir).then_some(())?;
+        let dir = if base_dir.as_os_str().is_empty() {
+            Path::new(".")
+        } else {
+            base_dir
+        };
+        let abs = std::path::absolute(dir).ok()?;
         abs.ancestors()
             .map(|d| d.join(w))
             .find(|p| loader.exists(p))

@@ -9,10 +9,10 @@
 //! A [`ParamError`] names the property; the experiment layer, which knows where
 //! each property was written, turns it into a `file:line:col` diagnostic.
 //!
-//! - [`value`]: [`Value`], [`Params`] (the values as written)
-//! - [`error`]: [`ParamError`]
-//! - [`schema`]: [`ParamSpec`], [`Schema`], [`Kind`]
-//! - [`dict`]: [`ParamDict`]
+//! - `value`: [`Value`], [`Params`] (the values as written)
+//! - `error`: [`ParamError`]
+//! - `schema`: [`ParamSpec`], [`Schema`], [`Kind`]
+//! - `dict`: [`ParamDict`]
 
 pub mod dict;
 pub mod error;

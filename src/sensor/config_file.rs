@@ -19,8 +19,6 @@ use crate::spectrum::library;
 use kdl::{KdlDocument, KdlNode, KdlValue};
 use std::path::Path;
 
-/// Block node names (files only).
-
 /// Suggestion text for an unknown name: a missing unit is called out explicitly.
 fn suggestion(word: &str, names: &[&str]) -> Option<String> {
     if let Some(n) = names
