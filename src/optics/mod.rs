@@ -52,6 +52,8 @@ pub trait Camera: Send + Sync {
 pub mod analysis;
 pub mod camera;
 pub mod fit;
+pub mod lstsq;
+pub mod pass_region;
 pub mod prescription;
 pub mod radiance;
 pub mod rtf;
