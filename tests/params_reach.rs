@@ -122,7 +122,7 @@ impl Case {
             self.props("scene")
         );
         for node in [
-            "camera", "lens", "render", "override", "add", "measured", "measure",
+            "camera", "lens", "render", "override", "add", "measured", "measure", "sanity",
         ] {
             if let Some(p) = self.nodes.get(node) {
                 s.push_str(&format!("    {node}{}\n", fmt_props(p)));
@@ -247,6 +247,11 @@ fn setup(schema: &Schema, p: &ParamSpec, c: &mut Case) -> &'static str {
         }
         c.set("measured", p.name, ex);
         return "measured";
+    }
+    if node.starts_with("sanity") {
+        c.replace("sanity", vec![("", "\"pov\"")]);
+        c.set("sanity", p.name, ex);
+        return "sanity";
     }
     if let Some(k) = node.strip_prefix("measure ") {
         let kind = k.trim_matches('"');
@@ -526,6 +531,17 @@ fn probe(
                 "pixel-um" => m.pixel_um.and_then(num),
                 "labels" => file(&m.labels).as_deref().and_then(text),
                 "names" => file(&m.names).as_deref().and_then(text),
+                _ => None,
+            }
+        }
+        n if n.starts_with("sanity") => {
+            let o = camsim::pov::check_params::pov_check(&spec.sanity.as_ref().unwrap().params)
+                .map_err(|x| x.to_string())?;
+            match p.name {
+                "min-iou" => num(o.min_iou),
+                "width-px" => o.width_px.map(|x| x as f64).and_then(num),
+                "height-px" => o.height_px.map(|x| x as f64).and_then(num),
+                "through" => text(if o.through_lens { "lens" } else { "pinhole" }),
                 _ => None,
             }
         }

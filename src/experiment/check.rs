@@ -49,6 +49,9 @@ pub fn check_stages(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError)>
     for a in &spec.additions {
         super::stages::target_spec(a, dir).map_err(|e| located(e, &a.spans, a.span))?;
     }
+    if let Some(s) = &spec.sanity {
+        crate::pov::check_params::pov_check(&s.params).map_err(|e| located(e, &s.spans, s.span))?;
+    }
     for o in &spec.overrides {
         crate::scene::edits::check_override(&o.params, dir)
             .map_err(|e| located(e, &o.spans, o.span))?;

@@ -145,6 +145,7 @@ pub fn schemas() -> Vec<&'static Schema> {
     v.push(&crate::scene::edits::OVERRIDE_SCHEMA);
     v.extend(crate::measure::request::schemas());
     v.push(&MEASURED_SCHEMA);
+    v.push(&crate::pov::check_params::SCHEMA);
     v
 }
 

@@ -185,6 +185,12 @@ pub fn run_variant(v: &PlannedVariant) -> Result<VariantOutput> {
             out.curves.push((m.name.clone(), r.curves));
         }
     }
+    if let Some(s) = &spec.sanity {
+        let (figures, png) = stages::pov_sanity(spec, s)?;
+        out.figures.extend(figures);
+        out.previews
+            .push(("pov-side-by-side.png".into(), png, String::new()));
+    }
     let rois = serde_json::to_string(&rois).unwrap_or_else(|_| "[]".into());
     for p in &mut out.previews {
         if p.0 == "sensor.png" {

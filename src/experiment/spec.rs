@@ -210,6 +210,10 @@ pub struct ResolvedExperiment {
     /// Captured images (`measured "name" file="…"`), read by measurements with `input="name"`.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub measured: Vec<MeasuredInput>,
+    /// `sanity "pov" …`: the POV-Ray geometry check of every variant (its
+    /// properties in `params`; `kind` is "pov").
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sanity: Option<Measure>,
     /// Values of label-only sweep axes (`tag.<name>`), for ids and results.
     pub tags: BTreeMap<String, Value>,
 }
@@ -233,6 +237,7 @@ impl ResolvedExperiment {
             render: RenderSettings::default(),
             measures: Vec::new(),
             measured: Vec::new(),
+            sanity: None,
             tags: BTreeMap::new(),
         }
     }

@@ -376,3 +376,45 @@ pub fn colorimetry(m: &Measure, spec: &ResolvedExperiment) -> Result<Vec<Figure>
     };
     crate::measure::colorimetry::colorimetry(&m.name, &o, &spec.render.wavelength)
 }
+
+/// `sanity "pov"`: the variant's scene and camera rendered by POV-Ray, one
+/// flat colour per object, against camsim's labels (`pov::sanity`). Figures:
+/// per object `<object>/iou` and `min_iou`; the side-by-side PNG (camsim |
+/// POV-Ray | disagreement) for the report. An object larger than 100 pixels
+/// below `min-iou` fails the variant, naming it.
+pub fn pov_sanity(spec: &ResolvedExperiment, node: &Measure) -> Result<(Vec<Figure>, Vec<u8>)> {
+    let opts = crate::pov::check_params::pov_check(&node.params)
+        .map_err(|e| Error::invalid(format!("sanity \"pov\": {e}")))?;
+    let scene = build_scene(spec)?;
+    let camera = build_camera(spec, &scene)?;
+    let film = film_spec(spec, &scene)?;
+    let (w, h) = opts.size(film.width_px, film.height_px);
+    let s = if opts.through_lens {
+        crate::pov::check(&scene, camera.as_ref(), &film, w, h)?
+    } else {
+        crate::pov::check_as_pinhole(&scene, camera.as_ref(), &film, w, h)?
+    };
+    let failures = s.failures(opts.min_iou);
+    if !failures.is_empty() {
+        return Err(Error::invalid(format!(
+            "sanity \"pov\": {} object(s) disagree with POV-Ray (IoU < {}): {}",
+            failures.len(),
+            opts.min_iou,
+            failures
+                .iter()
+                .map(|r| format!("{} {:.4}", r.object, r.iou))
+                .collect::<Vec<_>>()
+                .join(", ")
+        )));
+    }
+    let mut figures: Vec<Figure> = s
+        .rows
+        .iter()
+        .filter(|r| r.counts())
+        .map(|r| Figure::new(&node.name, format!("{}/iou", r.object), "1", r.iou, 0.0))
+        .collect();
+    if let Some(m) = s.min_iou() {
+        figures.push(Figure::new(&node.name, "min_iou", "1", m.iou, 0.0));
+    }
+    Ok((figures, s.side_by_side_png()?))
+}

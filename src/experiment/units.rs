@@ -85,6 +85,7 @@ pub const DIMENSIONLESS: &[&str] = &[
 pub const DIMENSIONLESS_WORDS: &[&str] = &[
     "count",
     "percentile",
+    "iou",
     "ratio",
     "factor",
     "gain",

@@ -13,6 +13,7 @@
 //! - `sanity`: the comparison (IoU per object, `iou.csv`, side-by-side PNG).
 
 pub mod camera;
+pub mod check_params;
 pub mod export;
 pub mod povray;
 pub mod sanity;

@@ -426,6 +426,10 @@ impl P {
                     measure_spans.insert(m.name.clone(), m.span);
                     spec.measures.push(m);
                 }
+                "sanity" => {
+                    self.no_children(file, n)?;
+                    spec.sanity = Some(self.parse_sanity(file, n)?);
+                }
                 "measured" => {
                     self.no_children(file, n)?;
                     let c = self.parse_measured(file, n, &dir)?;

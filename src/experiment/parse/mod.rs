@@ -49,6 +49,7 @@ const EXPERIMENT_NODES: &[&str] = &[
     "sweep",
     "measure",
     "measured",
+    "sanity",
 ];
 const SINGLETONS: &[&str] = &[
     "description",
@@ -59,6 +60,7 @@ const SINGLETONS: &[&str] = &[
     "sensor",
     "render",
     "sweep",
+    "sanity",
 ];
 const MAX_BASE_DEPTH: usize = 16;
 

@@ -428,4 +428,45 @@ impl P {
             span: nspan,
         })
     }
+
+    /// `sanity "pov" [min-iou=…] [width-px=…] [height-px=…] [through=…]`.
+    pub(super) fn parse_sanity(&self, file: usize, n: &KdlNode) -> Result<Measure, Located> {
+        let sp = self.node_span(file, n);
+        let mut kind = None;
+        let mut params = Params::new();
+        let mut spans = PropSpans::default();
+        for e in self.entries(file, n)? {
+            match e.name {
+                None => match &e.value {
+                    Value::String(k) if k == "pov" && kind.is_none() => kind = Some(k.clone()),
+                    v => {
+                        return Err(self
+                            .e(
+                                e.vspan,
+                                format!("sanity check {}: expected \"pov\"", apply::describe(v)),
+                            )
+                            .with_help("write sanity \"pov\" [min-iou=0.98]"));
+                    }
+                },
+                Some((k, ks)) => {
+                    apply::check_generic(&k, &e.value).map_err(|x| self.ae(ks, x))?;
+                    params.set(k.clone(), e.value);
+                    spans.insert(&k, ks, e.vspan);
+                }
+            }
+        }
+        let Some(kind) = kind else {
+            return Err(self
+                .e(sp, "'sanity' needs the check's name")
+                .with_help("write sanity \"pov\""));
+        };
+        Ok(Measure {
+            name: "sanity-pov".into(),
+            kind,
+            of: vec![],
+            params,
+            span: sp,
+            spans,
+        })
+    }
 }
