@@ -1,6 +1,6 @@
 //! The properties of a sensor — the scalar nodes of a sensor file and the
 //! inline properties of an experiment's `sensor` node — in one [`SCHEMA`], read
-//! by one setter ([`set_property`]), and [`sensor_config`]: the one function
+//! by one setter (`set_property`), and [`sensor_config`]: the one function
 //! `camsim check` and `camsim run` call to build a sensor from its file and
 //! its inline properties.
 //!
@@ -495,7 +495,7 @@ fn exclusive(d: &ParamDict, a: &str, b: &str, why: &str) -> Result<(), ParamErro
 }
 
 /// Apply an experiment's inline `sensor` properties to `cfg`: every property
-/// through [`set_property`] in [`SCHEMA`] order, then unknown names and the
+/// through `set_property` in [`SCHEMA`] order, then unknown names and the
 /// cross-field checks. Errors name the property.
 pub fn apply_params(cfg: &mut SensorConfig, params: &Params) -> Result<(), ParamError> {
     let d = ParamDict::new(params, &SCHEMA);
