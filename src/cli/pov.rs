@@ -66,25 +66,6 @@ fn scene_camera(spec: &CameraSpec, film: &FilmSpec) -> Result<Box<dyn camsim::op
     camsim::optics::camera::build(&model, film)
 }
 
-/// Check image size: the flags, else the film's size scaled to ≤ 640 px on
-/// its long side; a single flag keeps the film's aspect.
-fn check_size(film: &FilmSpec, w: Option<u32>, h: Option<u32>) -> (u32, u32) {
-    let aspect = film.width_px as f64 / film.height_px.max(1) as f64;
-    let round = |x: f64| (x.round() as u32).max(1);
-    match (w, h) {
-        (Some(w), Some(h)) => (w, h),
-        (Some(w), None) => (w, round(w as f64 / aspect)),
-        (None, Some(h)) => (round(h as f64 * aspect), h),
-        (None, None) => {
-            let k = (film.width_px.max(film.height_px) as f64 / 640.0).max(1.0);
-            (
-                round(film.width_px as f64 / k),
-                round(film.height_px as f64 / k),
-            )
-        }
-    }
-}
-
 pub fn pov(a: PovArgs) -> Result<i32> {
     let usage = |m: &str| -> Result<i32> {
         eprintln!("error: {m}");
@@ -126,7 +107,7 @@ pub fn pov(a: PovArgs) -> Result<i32> {
         .as_ref()
         .ok_or_else(|| Error::invalid(format!("{}: the scene has no camera", a.scene.display())))?;
     let camera = scene_camera(spec, &film)?;
-    let (w, h) = check_size(&film, a.width, a.height);
+    let (w, h) = camsim::pov::check_params::check_size(&film, a.width, a.height);
     let s = if a.pinhole {
         sanity::check_as_pinhole(&scene, camera.as_ref(), &film, w, h)?
     } else {

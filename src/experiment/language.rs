@@ -7,26 +7,10 @@
 
 use crate::params::{Kind, ParamSpec, Schema};
 
-const fn p(
-    name: &'static str,
-    kind: Kind,
-    default: &'static str,
-    doc: &'static str,
-    example: &'static str,
-) -> ParamSpec {
-    ParamSpec {
-        name,
-        kind,
-        default,
-        doc,
-        example,
-    }
-}
-
 /// `scene "FILE" [materials=…]`.
 pub static SCENE_SCHEMA: Schema = Schema {
     node: "scene \"FILE\"",
-    params: &[p(
+    params: &[ParamSpec::new(
         "materials",
         Kind::Choice(&["paper", "file"]),
         "file",
@@ -39,21 +23,21 @@ pub static SCENE_SCHEMA: Schema = Schema {
 pub static CAMERA_SCHEMA: Schema = Schema {
     node: "camera",
     params: &[
-        p(
+        ParamSpec::new(
             "position-m",
             Kind::Vec3,
             "",
             "eye position in scene coordinates (required)",
             "(0.013 0.117 -0.41)",
         ),
-        p(
+        ParamSpec::new(
             "look-at-m",
             Kind::Vec3,
             "",
             "a point on the optical axis (required)",
             "(0.021 0.109 0.63)",
         ),
-        p(
+        ParamSpec::new(
             "up",
             Kind::Vec3,
             "(0 1 0)",
@@ -67,22 +51,22 @@ pub static CAMERA_SCHEMA: Schema = Schema {
 pub static RENDER_SCHEMA: Schema = Schema {
     node: "render",
     params: &[
-        p("spp", Kind::Integer, "64", "samples per pixel", "37"),
-        p(
+        ParamSpec::new("spp", Kind::Integer, "64", "samples per pixel", "37"),
+        ParamSpec::new(
             "max-bounces",
             Kind::Integer,
             "5",
             "maximum path length in bounces (0: emitters seen directly)",
             "3",
         ),
-        p(
+        ParamSpec::new(
             "seed",
             Kind::Integer,
             "0",
             "random seed (`camsim run --seed` replaces it)",
             "4242",
         ),
-        p(
+        ParamSpec::new(
             "wavelength-nm",
             Kind::Numbers,
             "(400 700 10)",
@@ -96,28 +80,28 @@ pub static RENDER_SCHEMA: Schema = Schema {
 pub static MEASURED_SCHEMA: Schema = Schema {
     node: "measured \"NAME\"",
     params: &[
-        p(
+        ParamSpec::new(
             "file",
             Kind::File,
             "",
             "the captured image: PNG (8/16 bit), OpenEXR or DNG/TIFF (required)",
             "\"capture.png\"",
         ),
-        p(
+        ParamSpec::new(
             "pixel-um",
             Kind::Number,
             "",
             "pixel pitch of the capture (for cy/mm figures)",
             "1.55",
         ),
-        p(
+        ParamSpec::new(
             "labels",
             Kind::File,
             "",
             "grey PNG label map: value k = the object on line k of `names` (needs names)",
             "\"labels.png\"",
         ),
-        p(
+        ParamSpec::new(
             "names",
             Kind::File,
             "",

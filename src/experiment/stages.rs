@@ -12,7 +12,7 @@ use crate::optical_image::{OpticalImage, Rect};
 use crate::optics::Camera;
 use crate::params::ParamError;
 use crate::render::RenderSettings;
-use crate::scene::edits::{self, Placement, TargetSpec, object_matches};
+use crate::scene::edits::{self, Placement, TargetSpec};
 use crate::scene::{CameraModel, CameraPose, CameraSpec, FilmSpec, Scene, look_at_to_world};
 use crate::sensor::SensorConfig;
 use crate::spectrum::WavelengthGrid;
@@ -195,19 +195,6 @@ fn wanted_objects(spec: &ResolvedExperiment) -> Option<Vec<(String, bool)>> {
     Some(v)
 }
 
-/// The part of a slanted-edge plate's box that the SFR reads: the central half
-/// of its width (both plateaus and the edge) and at most 128 rows about its
-/// centre (≥ 11 rows make one phase cycle at 5°).
-fn edge_strip(b: Rect) -> Rect {
-    let h = (b.h / 2).clamp(8.min(b.h), 128);
-    Rect::new(
-        b.x + b.w / 4,
-        b.y + (b.h - h) / 2,
-        (b.w / 2).max(8.min(b.w)),
-        h,
-    )
-}
-
 /// Find the film rectangle holding `objects` with a cheap label pass: a coarse
 /// film (≤ 512 px on its long side), 1 spp, primary hits only, through the
 /// same camera; boxes are scaled back and padded by two coarse pixels.
@@ -237,7 +224,7 @@ fn roi_of_objects(
     let mut roi: Option<Rect> = None;
     let mut rects = BTreeMap::new();
     for (name, strip) in objects {
-        let b = label_box(
+        let b = crate::measure::inputs::label_box(
             &img.labels,
             &img.label_names,
             img.width(),
@@ -259,7 +246,7 @@ fn roi_of_objects(
                 ((x1 - x0) * k).min(film.width_px - (x0 * k).min(film.width_px - 1)),
                 ((y1 - y0) * k).min(film.height_px - (y0 * k).min(film.height_px - 1)),
             );
-            r = edge_strip(inner);
+            r = crate::measure::sfr::edge_strip(inner);
         }
         rects.insert(name.clone(), r);
         roi = Some(roi.map_or(r, |a| a.union(&r)));
@@ -310,29 +297,6 @@ pub fn simulate_sensor(spec: &ResolvedExperiment, oi: &OpticalImage) -> Result<S
     let cfg = sensor_config(spec)?
         .ok_or_else(|| Error::invalid(format!("experiment '{}' has no sensor", spec.name)))?;
     crate::sensor::simulate(&cfg, oi, spec.render.seed)
-}
-
-/// Bounding box (window coordinates) of the pixels labelled `name` (or below
-/// it); None when no pixel carries it.
-fn label_box(labels: &[u32], names: &[String], w: u32, h: u32, name: &str) -> Option<Rect> {
-    let ids: Vec<u32> = names
-        .iter()
-        .enumerate()
-        .filter(|(_, n)| object_matches(n, name))
-        .map(|(i, _)| i as u32)
-        .collect();
-    let (mut x0, mut y0, mut x1, mut y1) = (u32::MAX, u32::MAX, 0u32, 0u32);
-    for y in 0..h {
-        for x in 0..w {
-            if ids.contains(&labels[(y * w + x) as usize]) {
-                x0 = x0.min(x);
-                y0 = y0.min(y);
-                x1 = x1.max(x + 1);
-                y1 = y1.max(y + 1);
-            }
-        }
-    }
-    (x0 != u32::MAX).then(|| Rect::new(x0, y0, x1 - x0, y1 - y0))
 }
 
 /// Run one measurement: figures for results.csv and curves for the report.
@@ -388,7 +352,7 @@ pub fn pov_sanity(spec: &ResolvedExperiment, node: &Measure) -> Result<(Vec<Figu
     let scene = build_scene(spec)?;
     let camera = build_camera(spec, &scene)?;
     let film = film_spec(spec, &scene)?;
-    let (w, h) = opts.size(film.width_px, film.height_px);
+    let (w, h) = crate::pov::check_params::check_size(&film, opts.width_px, opts.height_px);
     let s = if opts.through_lens {
         crate::pov::check(&scene, camera.as_ref(), &film, w, h)?
     } else {

@@ -71,6 +71,25 @@ pub struct ParamSpec {
     pub example: &'static str,
 }
 
+impl ParamSpec {
+    /// A property (for `static` schemas).
+    pub const fn new(
+        name: &'static str,
+        kind: Kind,
+        default: &'static str,
+        doc: &'static str,
+        example: &'static str,
+    ) -> Self {
+        Self {
+            name,
+            kind,
+            default,
+            doc,
+            example,
+        }
+    }
+}
+
 /// All properties of one node kind (e.g. `measure "sfr"`, `sensor`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Schema {

@@ -3,6 +3,7 @@
 //! once through a [`ParamDict`].
 
 use crate::params::{Kind, ParamDict, ParamError, ParamSpec, Params, Schema};
+use crate::scene::FilmSpec;
 
 /// `sanity "pov" …`.
 pub static SCHEMA: Schema = Schema {
@@ -64,20 +65,22 @@ pub fn pov_check(params: &Params) -> Result<PovCheck, ParamError> {
     Ok(c)
 }
 
-impl PovCheck {
-    /// The check image size for a film: as given, else the film's, scaled to
-    /// at most 640 px on its long side (one given side keeps the aspect).
-    pub fn size(&self, film_w: u32, film_h: u32) -> (u32, u32) {
-        let aspect = film_w as f64 / film_h.max(1) as f64;
-        let round = |x: f64| (x.round() as u32).max(1);
-        match (self.width_px, self.height_px) {
-            (Some(w), Some(h)) => (w, h),
-            (Some(w), None) => (w, round(w as f64 / aspect)),
-            (None, Some(h)) => (round(h as f64 * aspect), h),
-            (None, None) => {
-                let k = (film_w.max(film_h) as f64 / 640.0).max(1.0);
-                (round(film_w as f64 / k), round(film_h as f64 / k))
-            }
+/// The check image size for a film: as given, else the film's, scaled to at
+/// most 640 px on its long side (one given side keeps the film's aspect).
+/// `camsim pov --width/--height` and `sanity "pov" width-px/height-px`.
+pub fn check_size(film: &FilmSpec, w: Option<u32>, h: Option<u32>) -> (u32, u32) {
+    let aspect = film.width_px as f64 / film.height_px.max(1) as f64;
+    let round = |x: f64| (x.round() as u32).max(1);
+    match (w, h) {
+        (Some(w), Some(h)) => (w, h),
+        (Some(w), None) => (w, round(w as f64 / aspect)),
+        (None, Some(h)) => (round(h as f64 * aspect), h),
+        (None, None) => {
+            let k = (film.width_px.max(film.height_px) as f64 / 640.0).max(1.0);
+            (
+                round(film.width_px as f64 / k),
+                round(film.height_px as f64 / k),
+            )
         }
     }
 }

@@ -192,6 +192,24 @@ pub fn compare(names: &[String], camsim: &LabelImage, povray: &LabelImage) -> Re
         .collect())
 }
 
+/// The check image's film (`width` × `height` over `film`'s width) and the
+/// pinhole equivalent of `camera` posed by the scene's camera on it.
+fn equivalent(
+    scene: &Scene,
+    camera: &dyn Camera,
+    film: &FilmSpec,
+    width: u32,
+    height: u32,
+) -> Result<(FilmSpec, PinholeEquivalent)> {
+    let spec = scene
+        .camera
+        .as_ref()
+        .ok_or_else(|| Error::invalid("the scene has no camera; the POV-Ray check needs one"))?;
+    let small = check_film(film, width, height)?;
+    let eq = PinholeEquivalent::of_camera(spec.to_world, camera, &small)?;
+    Ok((small, eq))
+}
+
 /// Run the check: camsim's labels of `scene` through `camera` (posed by the
 /// scene's camera, on a `width` × `height` image covering `film`'s physical
 /// width) against POV-Ray's render of the same scene through the camera's
@@ -203,12 +221,7 @@ pub fn check(
     width: u32,
     height: u32,
 ) -> Result<Sanity> {
-    let spec = scene
-        .camera
-        .as_ref()
-        .ok_or_else(|| Error::invalid("the scene has no camera; the POV-Ray check needs one"))?;
-    let small = check_film(film, width, height)?;
-    let pinhole = PinholeEquivalent::of_camera(spec.to_world, camera, &small)?;
+    let (small, pinhole) = equivalent(scene, camera, film, width, height)?;
     check_with(scene, scene, camera, &pinhole, &small)
 }
 
@@ -226,14 +239,9 @@ pub fn check_as_pinhole(
     width: u32,
     height: u32,
 ) -> Result<Sanity> {
-    let spec = scene
-        .camera
-        .as_ref()
-        .ok_or_else(|| Error::invalid("the scene has no camera; the POV-Ray check needs one"))?;
-    let small = check_film(film, width, height)?;
-    let eq = PinholeEquivalent::of_camera(spec.to_world, camera, &small)?;
+    let (small, eq) = equivalent(scene, camera, film, width, height)?;
     let pinhole = crate::optics::pinhole::Pinhole::new(eq.fov_short_deg(), 2.0, &small)?;
-    let pov = PinholeEquivalent::of_camera(spec.to_world, &pinhole, &small)?;
+    let pov = PinholeEquivalent::of_camera(eq.to_world, &pinhole, &small)?;
     check_with(scene, scene, &pinhole, &pov, &small)
 }
 

@@ -84,41 +84,25 @@ pub fn remove_object(scene: &mut Scene, name: &str) -> Result<()> {
     Ok(())
 }
 
-const fn spec(
-    name: &'static str,
-    kind: Kind,
-    default: &'static str,
-    doc: &'static str,
-    example: &'static str,
-) -> ParamSpec {
-    ParamSpec {
-        name,
-        kind,
-        default,
-        doc,
-        example,
-    }
-}
-
 /// `override "OBJECT" …`.
 pub static OVERRIDE_SCHEMA: Schema = Schema {
     node: "override \"OBJECT\"",
     params: &[
-        spec(
+        ParamSpec::new(
             "reflectance",
             Kind::Spectrum,
             "",
             "new diffuse reflectance of the object's materials (a diffuse+specular material keeps its specular-to-diffuse ratio)",
             "\"cbox-red-wall\"",
         ),
-        spec(
+        ParamSpec::new(
             "radiance",
             Kind::Spectrum,
             "",
             "new emitted radiance of the object's emitting shapes, W/(sr·m²·nm)",
             "\"cie-a\"",
         ),
-        spec(
+        ParamSpec::new(
             "radiance-scale",
             Kind::Number,
             "1",
@@ -228,35 +212,35 @@ pub struct Placement<'a> {
 }
 
 const PLACEMENT: [ParamSpec; 5] = [
-    spec(
+    ParamSpec::new(
         "target",
         Kind::Choice(Target::NAMES),
         "",
         "what to add (required)",
         "\"mcc\"",
     ),
-    spec(
+    ParamSpec::new(
         "position-m",
         Kind::Vec3,
         "the target's",
         "position in scene coordinates (MCC: bottom centre of the front face; edge: plate centre; mesh: bounding-box centre)",
         "(0.011 0.052 0.093)",
     ),
-    spec(
+    ParamSpec::new(
         "rotate-deg",
         Kind::Vec3,
         "(0 0 0)",
         "rotation about x, then y, then z (a mesh turns about y only)",
         "(3 0 2)",
     ),
-    spec(
+    ParamSpec::new(
         "scale",
         Kind::Numbers,
         "1",
         "size factor: one number, or (x y z) (MCC and mesh: uniform only; edge: x = width, y = height)",
         "1.25",
     ),
-    spec(
+    ParamSpec::new(
         "file",
         Kind::File,
         "",
@@ -273,14 +257,14 @@ pub static MCC_SCHEMA: Schema = Schema {
         PLACEMENT[1],
         PLACEMENT[2],
         PLACEMENT[3],
-        spec(
+        ParamSpec::new(
             "patch-size-m",
             Kind::Number,
             "0.01 (× scale)",
             "side of a colour patch",
             "0.0125",
         ),
-        spec(
+        ParamSpec::new(
             "patch-pitch-m",
             Kind::Number,
             "0.014 (× scale)",
@@ -298,14 +282,14 @@ pub static SLANTED_EDGE_SCHEMA: Schema = Schema {
         PLACEMENT[1],
         PLACEMENT[2],
         PLACEMENT[3],
-        spec(
+        ParamSpec::new(
             "tilt-deg",
             Kind::Number,
             "5",
             "in-plane tilt of the edge from vertical (ISO 12233: a few degrees)",
             "7.5",
         ),
-        spec(
+        ParamSpec::new(
             "reflectance",
             Kind::Spectrum,
             "the white wall",
@@ -321,7 +305,7 @@ pub static MESH_SCHEMA: Schema = Schema {
     params: &[
         PLACEMENT[0],
         PLACEMENT[1],
-        spec(
+        ParamSpec::new(
             "rotate-deg",
             Kind::Vec3,
             "(0 0 0)",
@@ -330,7 +314,7 @@ pub static MESH_SCHEMA: Schema = Schema {
         ),
         PLACEMENT[3],
         PLACEMENT[4],
-        spec(
+        ParamSpec::new(
             "reflectance",
             Kind::Spectrum,
             "the white wall",
@@ -347,42 +331,42 @@ pub static SPOT_LIGHT_SCHEMA: Schema = Schema {
     node: "add target=\"spot-light\"",
     params: &[
         PLACEMENT[0],
-        spec(
+        ParamSpec::new(
             "position-m",
             Kind::Vec3,
             "",
             "position of the light (required)",
             "(0.008 0.15 -0.3)",
         ),
-        spec(
+        ParamSpec::new(
             "look-at-m",
             Kind::Vec3,
             "",
             "point the spot's axis passes through (required)",
             "(0.008 0.03 0.01)",
         ),
-        spec(
+        ParamSpec::new(
             "intensity",
             Kind::Spectrum,
             "",
             "on-axis intensity, W/(sr·nm) (required)",
             "\"cbox-lamp\"",
         ),
-        spec(
+        ParamSpec::new(
             "intensity-scale",
             Kind::Number,
             "1",
             "factor on the intensity",
             "0.0015",
         ),
-        spec(
+        ParamSpec::new(
             "cone-deg",
             Kind::Number,
             "30",
             "half-angle where the light ends",
             "55",
         ),
-        spec(
+        ParamSpec::new(
             "falloff-start-deg",
             Kind::Number,
             "cone-deg",

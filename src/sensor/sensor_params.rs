@@ -16,22 +16,6 @@ use std::path::Path;
 /// Block nodes of a sensor file (not settable inline).
 pub const BLOCK_NAMES: &[&str] = &["qe", "qe-matrix", "relative-illumination"];
 
-const fn spec(
-    name: &'static str,
-    kind: Kind,
-    default: &'static str,
-    doc: &'static str,
-    example: &'static str,
-) -> ParamSpec {
-    ParamSpec {
-        name,
-        kind,
-        default,
-        doc,
-        example,
-    }
-}
-
 /// The CFA patterns a sensor can have.
 pub const CFA_PATTERNS: &[&str] = &["rggb", "bggr", "grbg", "gbrg", "mono"];
 
@@ -43,234 +27,234 @@ pub const CFA_PATTERNS: &[&str] = &["rggb", "bggr", "grbg", "gbrg", "mono"];
 pub static SCHEMA: Schema = Schema {
     node: "sensor",
     params: &[
-        spec(
+        ParamSpec::new(
             "name",
             Kind::Text,
             "generic",
             "Name of the sensor in manifests and reports",
             "\"my-sensor\"",
         ),
-        spec(
+        ParamSpec::new(
             "rows",
             Kind::Integer,
             "",
             "Pixel rows (1…10⁶); absent: the optical image's field of view",
             "480",
         ),
-        spec(
+        ParamSpec::new(
             "cols",
             Kind::Integer,
             "",
             "Pixel columns (1…10⁶); absent: the optical image's field of view",
             "640",
         ),
-        spec(
+        ParamSpec::new(
             "pixel-size-um",
             Kind::Number,
             "1.4",
             "Pixel pitch, µm (> 0, ≤ 1000)",
             "1.12",
         ),
-        spec(
+        ParamSpec::new(
             "fill-factor",
             Kind::Number,
             "1",
             "Photosensitive fraction of the pixel area, (0, 1]",
             "0.8",
         ),
-        spec(
+        ParamSpec::new(
             "cfa",
             Kind::Choice(CFA_PATTERNS),
             "rggb",
             "Colour filter array, read row by row from the top-left 2×2 cell; \"mono\" needs a file with one `qe w=…`",
             "\"bggr\"",
         ),
-        spec(
+        ParamSpec::new(
             "ir-filter",
             Kind::Spectrum,
             "one",
             "IR-cut filter transmittance (a shipped spectrum or file.csv#column, relative to the sensor file)",
             "\"ircf-largan\"",
         ),
-        spec(
+        ParamSpec::new(
             "well-capacity-e",
             Kind::Number,
             "6000",
             "Well capacity, electrons (> 0)",
             "4500",
         ),
-        spec(
+        ParamSpec::new(
             "voltage-swing-v",
             Kind::Number,
             "0.45",
             "Voltage swing of the pixel, V (> 0)",
             "0.6",
         ),
-        spec(
+        ParamSpec::new(
             "conversion-gain-dv-per-e",
             Kind::Number,
             "",
             "Conversion gain at analog gain 1, DV/e⁻ (> 0); absent with conversion-gain-uv-per-e: voltage swing / well capacity; not with conversion-gain-uv-per-e",
             "0.25",
         ),
-        spec(
+        ParamSpec::new(
             "conversion-gain-uv-per-e",
             Kind::Number,
             "",
             "Conversion gain at the sense node, µV/e⁻ (> 0); not with conversion-gain-dv-per-e",
             "50",
         ),
-        spec(
+        ParamSpec::new(
             "analog-gain",
             Kind::Number,
             "1",
             "Gain applied to the pixel voltage before the ADC (> 0); not with iso",
             "2.5",
         ),
-        spec(
+        ParamSpec::new(
             "iso",
             Kind::Number,
             "55",
             "Analog gain as ISO: gain = iso / 55 (> 0); not with analog-gain",
             "220",
         ),
-        spec(
+        ParamSpec::new(
             "black-level-dv",
             Kind::Number,
             "64",
             "Black level, DV (≥ 0, below the white level 2^bits − 1)",
             "128",
         ),
-        spec("bit-depth", Kind::Integer, "10", "ADC bits (1…16)", "12"),
-        spec(
+        ParamSpec::new("bit-depth", Kind::Integer, "10", "ADC bits (1…16)", "12"),
+        ParamSpec::new(
             "exposure-s",
             Kind::NumberOr(&["auto"]),
             "0.01",
             "Exposure time, s (≥ 0), or \"auto\" (auto-exposure-level, auto-exposure-percentile)",
             "0.125",
         ),
-        spec(
+        ParamSpec::new(
             "auto-exposure-level",
             Kind::Number,
             "0.95",
             "Auto-exposure target, fraction of full well, (0, 1]; switches exposure-s to \"auto\" (not with a numeric exposure-s)",
             "0.8",
         ),
-        spec(
+        ParamSpec::new(
             "auto-exposure-percentile",
             Kind::Number,
             "99.9",
             "Percentile of the pixels' mean signal that reaches the target, (0, 100]; switches exposure-s to \"auto\" (not with a numeric exposure-s)",
             "99.5",
         ),
-        spec(
+        ParamSpec::new(
             "read-noise-mv",
             Kind::Number,
             "0",
             "Read noise, mV rms (≥ 0)",
             "0.5",
         ),
-        spec(
+        ParamSpec::new(
             "reset-noise-mv",
             Kind::Number,
             "0",
             "Reset (kTC) noise, mV rms (≥ 0); 0 with correlated double sampling",
             "1.4",
         ),
-        spec(
+        ParamSpec::new(
             "dsnu-mv",
             Kind::Number,
             "0",
             "Dark signal non-uniformity, mV rms (≥ 0)",
             "0.25",
         ),
-        spec(
+        ParamSpec::new(
             "prnu-percent",
             Kind::Number,
             "0",
             "Photo-response non-uniformity, % rms (0 ≤ x < 100)",
             "1.5",
         ),
-        spec(
+        ParamSpec::new(
             "dark-voltage-mv-per-s",
             Kind::Number,
             "0",
             "Dark current as a voltage rate, mV/s (≥ 0)",
             "0.75",
         ),
-        spec(
+        ParamSpec::new(
             "column-fpn-offset-mv",
             Kind::Number,
             "0",
             "Column offset fixed-pattern noise, mV rms (≥ 0)",
             "0.1",
         ),
-        spec(
+        ParamSpec::new(
             "column-fpn-gain-percent",
             Kind::Number,
             "0",
             "Column gain fixed-pattern noise, % rms (≥ 0)",
             "0.2",
         ),
-        spec(
+        ParamSpec::new(
             "fpn-seed",
             Kind::Integer,
             "1",
             "Seed of the fixed-pattern fields (PRNU, DSNU, column FPN) of this sensor unit (0…2⁵³)",
             "4242",
         ),
-        spec(
+        ParamSpec::new(
             "photon-noise",
             Kind::Bool,
             "#true",
             "Simulate photon (shot) noise",
             "#false",
         ),
-        spec(
+        ParamSpec::new(
             "dark-current",
             Kind::Bool,
             "#true",
             "Simulate dark current",
             "#false",
         ),
-        spec("dsnu", Kind::Bool, "#true", "Simulate DSNU", "#false"),
-        spec("prnu", Kind::Bool, "#true", "Simulate PRNU", "#false"),
-        spec(
+        ParamSpec::new("dsnu", Kind::Bool, "#true", "Simulate DSNU", "#false"),
+        ParamSpec::new("prnu", Kind::Bool, "#true", "Simulate PRNU", "#false"),
+        ParamSpec::new(
             "read-noise",
             Kind::Bool,
             "#true",
             "Simulate read noise",
             "#false",
         ),
-        spec(
+        ParamSpec::new(
             "reset-noise",
             Kind::Bool,
             "#true",
             "Simulate reset noise",
             "#false",
         ),
-        spec(
+        ParamSpec::new(
             "column-fpn",
             Kind::Bool,
             "#true",
             "Simulate column fixed-pattern noise",
             "#false",
         ),
-        spec(
+        ParamSpec::new(
             "pixel-vignetting",
             Kind::Bool,
             "#true",
             "Apply the sensor file's relative-illumination",
             "#false",
         ),
-        spec(
+        ParamSpec::new(
             "clipping",
             Kind::Bool,
             "#true",
             "Clip at the full well and the ADC range",
             "#false",
         ),
-        spec(
+        ParamSpec::new(
             "quantization",
             Kind::Bool,
             "#true",
