@@ -16,6 +16,9 @@
 //! ```sh
 //! CAMSIM_BLESS=1 cargo test --release --test experiment_baselines
 //! ```
+//!
+//! `CAMSIM_BASELINES=fig05-relative-illumination,fig09-interreflection` limits
+//! a run (and a bless) to the experiments named.
 
 use camsim::report::diff::{DiffOptions, diff_rows};
 use camsim::report::results::read_results;
@@ -84,6 +87,21 @@ fn shipped_experiments_match_their_baselines() {
         "experiments/ holds {} experiments",
         exps.len()
     );
+    let only: Option<Vec<String>> = std::env::var("CAMSIM_BASELINES")
+        .ok()
+        .map(|s| s.split(',').map(|x| x.trim().to_string()).collect());
+    if let Some(o) = &only {
+        for n in o {
+            assert!(
+                exps.iter().any(|e| &e.0 == n),
+                "CAMSIM_BASELINES names '{n}', which is not an experiment in experiments/"
+            );
+        }
+    }
+    let exps: Vec<_> = exps
+        .into_iter()
+        .filter(|(n, _)| only.as_ref().is_none_or(|o| o.contains(n)))
+        .collect();
     let mut failures = vec![];
     for (name, file) in &exps {
         run(name, file, tmp.path());

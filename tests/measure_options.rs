@@ -194,10 +194,11 @@ fn check_locates_bad_measure_properties() {
             "\"wide\"",
             &["expected a finite number"],
         ),
+        ("    measure \"ri\" channel=\"x\"\n", "\"x\"", &["channel"]),
         (
-            "    measure \"ri\" channel=\"r\"\n",
-            "channel",
-            &["channel= applies to a captured image"],
+            "    measure \"compare-curve\" of=\"ri\" curve=\"ri\" reference-file=\"no-such.csv\"\n",
+            "\"no-such.csv\"",
+            &["reference file 'no-such.csv' not found"],
         ),
         (
             "    measure \"noise\" of=\"mcc\"\n",

@@ -192,7 +192,7 @@ fn setup(schema: &Schema, p: &ParamSpec, c: &mut Case) -> &'static str {
     if node.starts_with("lens model") {
         c.replace("lens", vec![]);
         match p.name {
-            "f-number" => c.set("lens", "fov-deg", "40"),
+            "f-number" | "falloff" => c.set("lens", "fov-deg", "40"),
             "model" => c.set("lens", "focal-length-mm", "4.38"),
             "focal-length-mm" => c.set("lens", "model", "\"thin-lens\""),
             "focus-distance-m" => {
@@ -260,6 +260,19 @@ fn setup(schema: &Schema, p: &ParamSpec, c: &mut Case) -> &'static str {
             "colorimetry" if p.name != "spectrum" => c.set("measure", "spectrum", "\"cie-d65\""),
             "sfr" | "profile" if p.name != "of" => c.set("measure", "of", "\"LeftWall\""),
             "mcc" if p.name != "of" => c.set("measure", "of", "\"mcc\""),
+            "compare-curve" => {
+                for (k, v) in [
+                    ("curve", "\"ri\""),
+                    (
+                        "reference-file",
+                        "\"lenses/zemax-reference/zemax_p4a_geometric_mtf.csv\"",
+                    ),
+                ] {
+                    if p.name != k {
+                        c.set("measure", k, v);
+                    }
+                }
+            }
             _ => {}
         }
         if p.name == "input" || (kind == "ri" && p.name == "channel") {
@@ -284,7 +297,9 @@ fn setup(schema: &Schema, p: &ParamSpec, c: &mut Case) -> &'static str {
 /// (a measurement to compare against, or to re-render) are checked by
 /// tests/experiment_measured.rs.
 fn params_level_only(schema: &Schema) -> bool {
-    schema.node == "measure \"compare\"" || schema.node == "measure \"convergence\""
+    schema.node == "measure \"compare\""
+        || schema.node == "measure \"compare-curve\""
+        || schema.node == "measure \"convergence\""
 }
 
 fn write_side_files(dir: &Path) {
@@ -301,6 +316,7 @@ fn write_side_files(dir: &Path) {
     std::fs::write(dir.join("names.txt"), "background\nthing\n").unwrap();
     // relative mesh files (`scenes/bunny.obj`) resolve from the experiment's directory
     std::os::unix::fs::symlink(Path::new(ROOT).join("scenes"), dir.join("scenes")).unwrap();
+    std::os::unix::fs::symlink(Path::new(ROOT).join("lenses"), dir.join("lenses")).unwrap();
 }
 
 fn parse(dir: &Path, text: &str) -> Result<experiment::plan::Plan, String> {
@@ -433,6 +449,9 @@ fn probe(
                 (CameraModel::ThinLens { .. }, "model") => text("thin-lens"),
                 (CameraModel::Pinhole { .. }, "model") => text("pinhole"),
                 (CameraModel::Pinhole { fov_deg, .. }, "fov-deg") => num(*fov_deg),
+                (CameraModel::Pinhole { cos4, .. }, "falloff") => {
+                    text(if *cos4 { "cos4" } else { "none" })
+                }
                 (CameraModel::Pinhole { f_number, .. }, "f-number")
                 | (CameraModel::ThinLens { f_number, .. }, "f-number") => num(*f_number),
                 (CameraModel::ThinLens { focal_length_m, .. }, "focal-length-mm") => {

@@ -79,6 +79,7 @@ fn scene() -> Scene {
         model: CameraModel::Pinhole {
             fov_deg: 60.0,
             f_number: 2.0,
+            cos4: true,
         },
     });
     s

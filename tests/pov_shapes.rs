@@ -193,6 +193,7 @@ fn every_shape_kind_agrees_through_a_pinhole() {
     let s = scene(CameraModel::Pinhole {
         fov_deg: 60.0,
         f_number: 2.0,
+        cos4: true,
     });
     let cam = camsim::optics::camera::build(&s.camera.as_ref().unwrap().model, &FILM).unwrap();
     let r = camsim::pov::check(&s, cam.as_ref(), &FILM, 360, 240).unwrap();

@@ -101,8 +101,9 @@ fn lamp_pixels_show_the_lamp_radiance(
     // The pinhole weight in closed form (not through the camera code): film
     // distance d with the shorter film side spanning the field of view, and
     // w = π/(4N²)·cos⁴θ.
-    let camsim::scene::CameraModel::Pinhole { fov_deg, f_number } =
-        sc.camera.as_ref().unwrap().model
+    let camsim::scene::CameraModel::Pinhole {
+        fov_deg, f_number, ..
+    } = sc.camera.as_ref().unwrap().model
     else {
         panic!("{scene}: expected a pinhole camera")
     };

@@ -27,7 +27,11 @@ fn with_camera(scene: &mut Scene, from: DVec3, to: DVec3, fov_deg: f64, f_number
     .unwrap();
     scene.camera = Some(CameraSpec {
         to_world,
-        model: CameraModel::Pinhole { fov_deg, f_number },
+        model: CameraModel::Pinhole {
+            fov_deg,
+            f_number,
+            cos4: true,
+        },
     });
 }
 

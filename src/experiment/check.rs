@@ -56,7 +56,46 @@ pub fn check_stages(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError)>
         crate::scene::edits::check_override(&o.params, dir)
             .map_err(|e| located(e, &o.spans, o.span))?;
     }
-    Ok(())
+    check_objects_stand_free(spec)
+}
+
+/// The scene with its edits, built as `run` builds it: no two objects may
+/// intersect ([`crate::scene::intersections`]). The error points at the `add`
+/// of an object involved, else at the `scene` node.
+fn check_objects_stand_free(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError)> {
+    let Some(f) = &spec.scene else {
+        return Ok(());
+    };
+    let scene = super::stages::build_scene(spec)
+        .map_err(|e| (f.span, ApplyError::new(format!("scene: {e}"))))?;
+    let tol = crate::scene::intersections::DEFAULT_TOLERANCE_M;
+    let Some(x) = crate::scene::intersections::intersecting_objects(&scene, tol)
+        .into_iter()
+        .next()
+    else {
+        return Ok(());
+    };
+    let added = spec
+        .additions
+        .iter()
+        .find(|a| a.id == x.a || a.id == x.b || x.a.starts_with(&format!("{}/", a.id)))
+        .or_else(|| {
+            spec.additions
+                .iter()
+                .find(|a| x.b.starts_with(&format!("{}/", a.id)))
+        });
+    let span = added.map(|a| a.span).unwrap_or(f.span);
+    Err((
+        span,
+        ApplyError::new(format!(
+            "objects '{}' and '{}' intersect: one reaches {:.1} mm into the other (more than the {} mm of contact)",
+            x.a,
+            x.b,
+            x.depth_m * 1e3,
+            tol * 1e3
+        ))
+        .help("move or scale the added object so it stands free, or remove \"…\" a base-scene object"),
+    ))
 }
 
 /// A measurement's options, built as `run` builds them.

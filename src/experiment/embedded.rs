@@ -21,7 +21,10 @@ macro_rules! embed {
 pub const EXPERIMENTS: &[(&str, &str)] = &[
     embed!("cornell-box.kdl"),
     embed!("e2e-quick.kdl"),
+    embed!("fig04-qualitative.kdl"),
+    embed!("fig05-relative-illumination.kdl"),
     embed!("fig07-lsf-mtf.kdl"),
+    embed!("fig09-interreflection.kdl"),
     embed!("rtf-vs-prescription.kdl"),
     embed!("smoke.kdl"),
 ];

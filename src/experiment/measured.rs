@@ -151,15 +151,6 @@ pub fn check_references(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyErr
                 }
                 _ => {}
             }
-        } else if let MeasureOptions::Ri(r) = &opts
-            && r.channel.is_some()
-        {
-            return Err((
-                m.spans.name_at("channel", m.span),
-                ApplyError::new(
-                    "ri of the rendered optical image reads band-integrated irradiance; channel= applies to a captured image (input=…)",
-                ),
-            ));
         }
         match &opts {
             MeasureOptions::Compare(c) => {
@@ -176,6 +167,13 @@ pub fn check_references(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyErr
                         ApplyError::new("compare: of and reference name the same measurement"),
                     ));
                 }
+            }
+            MeasureOptions::CompareCurve(_) => {
+                let of = single_of(
+                    m,
+                    "e.g. measure \"compare-curve\" of=\"ri\" curve=\"ri\" reference-file=\"….csv\"",
+                )?;
+                check_measurement_ref(spec, m, of).map_err(|e| (at("of"), e))?;
             }
             MeasureOptions::Convergence(_) => {
                 let of = single_of(m, "e.g. measure \"convergence\" of=\"sfr\" spp=(16 64 256)")?;
@@ -235,7 +233,7 @@ fn check_measurement_ref<'a>(
         .iter()
         .find(|x| x.name == name && x.name != m.name)
     {
-        Some(t) if matches!(t.kind.as_str(), "compare" | "convergence") => {
+        Some(t) if matches!(t.kind.as_str(), "compare" | "compare-curve" | "convergence") => {
             Err(ApplyError::new(format!(
                 "'{name}' is a '{}' measurement; {} refers to a measurement of an image",
                 t.kind, m.kind
@@ -258,8 +256,17 @@ fn check_measurement_ref<'a>(
 /// captured image (`input=`), `compare` and `convergence` (which renders on
 /// its own) need none of the variant's stages.
 pub fn needs_of(m: &Measure) -> stages::Needs {
-    if m.params.get("input").is_some() || matches!(m.kind.as_str(), "compare" | "convergence") {
+    if m.params.get("input").is_some()
+        || matches!(m.kind.as_str(), "compare" | "compare-curve" | "convergence")
+    {
         return stages::Needs::default();
+    }
+    if m.kind == "ri" && m.params.get("channel").is_some() {
+        // a channel of the simulated sensor image
+        return stages::Needs {
+            optical_image: true,
+            sensor_image: true,
+        };
     }
     stages::needs(&m.kind)
 }
@@ -407,6 +414,31 @@ fn compare_options(m: &Measure) -> Result<crate::measure::compare::CompareOption
             o.kind()
         ))),
     }
+}
+
+/// `compare-curve`: the curve named by `curve=` of measurement `of` against
+/// the reference curve of its CSV ([`crate::measure::compare_curve`]).
+pub fn compare_curve(m: &Measure, spec: &ResolvedExperiment, of: &Measured) -> Result<Measured> {
+    let MeasureOptions::CompareCurve(o) = options_of(m, spec)? else {
+        return Err(Error::invalid(format!(
+            "measurement '{}' is a '{}', not a compare-curve",
+            m.name, m.kind
+        )));
+    };
+    let want = o.curve.as_deref().unwrap_or_default();
+    let c = of.curves.iter().find(|c| c.name == want).ok_or_else(|| {
+        let names: Vec<&str> = of.curves.iter().map(|c| c.name.as_str()).collect();
+        Error::invalid(format!(
+            "compare-curve '{}': '{}' has no curve '{want}'; its curves: {}{}",
+            m.name,
+            m.of.first().map(String::as_str).unwrap_or(""),
+            names.join(", "),
+            crate::diag::did_you_mean(want, names.iter().copied())
+                .map(|s| format!(" (did you mean '{s}'?)"))
+                .unwrap_or_default()
+        ))
+    })?;
+    crate::measure::compare_curve::compare_curve(c, &o, &m.name)
 }
 
 /// `compare`: pair the figures of measurement `of` (simulated) and
@@ -635,10 +667,11 @@ pub fn measure_all(
     let mut done: Vec<Option<Measured>> = vec![None; spec.measures.len()];
     for pass in 0..2 {
         for (i, m) in spec.measures.iter().enumerate() {
-            if (m.kind == "compare") != (pass == 1) {
+            let combines = matches!(m.kind.as_str(), "compare" | "compare-curve");
+            if combines != (pass == 1) {
                 continue;
             }
-            let r = if m.kind == "compare" {
+            let r = if combines {
                 let get = |name: &str| -> Result<&Measured> {
                     spec.measures
                         .iter()
@@ -649,8 +682,12 @@ pub fn measure_all(
                         })
                 };
                 let of = m.of.first().map(String::as_str).unwrap_or("");
-                let reference = compare_options(m)?.reference.unwrap_or_default();
-                compare(m, get(of)?, get(&reference)?)?
+                if m.kind == "compare-curve" {
+                    compare_curve(m, spec, get(of)?)?
+                } else {
+                    let reference = compare_options(m)?.reference.unwrap_or_default();
+                    compare(m, get(of)?, get(&reference)?)?
+                }
             } else if m.kind == "convergence" {
                 convergence(m, spec)?
             } else if let Some(input) = m.params.str("input").map_err(Error::invalid)? {

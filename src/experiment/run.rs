@@ -111,7 +111,12 @@ pub struct VariantOutput {
 /// Run the figures of one variant.
 pub fn run_variant(v: &PlannedVariant) -> Result<VariantOutput> {
     let spec = &v.variant.spec;
-    let need = spec.measures.iter().fold(stages::Needs::default(), |a, m| {
+    let save_dng = spec.save.iter().any(|s| s == "dng");
+    let init = stages::Needs {
+        optical_image: save_dng,
+        sensor_image: save_dng,
+    };
+    let need = spec.measures.iter().fold(init, |a, m| {
         let n = super::measured::needs_of(m);
         stages::Needs {
             optical_image: a.optical_image || n.optical_image || n.sensor_image,
@@ -162,6 +167,20 @@ pub fn run_variant(v: &PlannedVariant) -> Result<VariantOutput> {
             crate::sensor::output::preview_png_bytes(&s, &neutral)?,
             String::new(),
         ));
+        if save_dng {
+            let cfg = stages::sensor_config(spec)?
+                .ok_or_else(|| Error::invalid("save \"dng\" needs a sensor (add a sensor node)"))?;
+            out.previews.push((
+                "sensor-raw-mosaic.png".into(),
+                crate::sensor::output::mosaic_png_bytes(&s)?,
+                String::new(),
+            ));
+            out.previews.push((
+                "sensor.dng".into(),
+                crate::sensor::output::dng_bytes(&s, &cfg)?,
+                String::new(),
+            ));
+        }
         si = Some(s);
     }
     let mut rois = vec![];

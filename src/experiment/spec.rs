@@ -173,17 +173,13 @@ pub struct MeasuredInput {
     pub span: Span,
 }
 
-/// Known measurement kinds.
-pub const MEASURE_KINDS: &[&str] = &[
-    "colorimetry",
-    "sfr",
-    "ri",
-    "noise",
-    "profile",
-    "mcc",
-    "compare",
-    "convergence",
-];
+/// What `save` can write for every variant: `dng`, the raw sensor mosaic as a
+/// DNG (`previews/<variant>/sensor.dng`, linked from the report) with a grey
+/// picture of the mosaic beside the white-balanced preview.
+pub const SAVE_KINDS: &[&str] = &["dng"];
+
+/// Known measurement kinds (the measurement layer's list).
+pub use crate::measure::request::KINDS as MEASURE_KINDS;
 
 /// An experiment with its base setups merged in, before sweeps are applied.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -214,6 +210,9 @@ pub struct ResolvedExperiment {
     /// properties in `params`; `kind` is "pov").
     #[serde(skip_serializing_if = "Option::is_none")]
     pub sanity: Option<Measure>,
+    /// `save "dng"`: extra images of every variant ([`SAVE_KINDS`]).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub save: Vec<String>,
     /// Values of label-only sweep axes (`tag.<name>`), for ids and results.
     pub tags: BTreeMap<String, Value>,
 }
@@ -238,6 +237,7 @@ impl ResolvedExperiment {
             measures: Vec::new(),
             measured: Vec::new(),
             sanity: None,
+            save: Vec::new(),
             tags: BTreeMap::new(),
         }
     }

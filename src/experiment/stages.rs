@@ -93,6 +93,7 @@ pub fn build_scene(spec: &ResolvedExperiment) -> Result<Scene> {
                 .unwrap_or(CameraModel::Pinhole {
                     fov_deg: 40.0,
                     f_number: 2.0,
+                    cos4: true,
                 });
         scene.camera = Some(CameraSpec { to_world, model });
     }
@@ -177,13 +178,16 @@ pub fn build_camera(spec: &ResolvedExperiment, scene: &Scene) -> Result<Box<dyn 
 /// Object names whose pixels the measurements read, and whether only the
 /// central edge strip is read (slanted edges); None = the whole film.
 fn wanted_objects(spec: &ResolvedExperiment) -> Option<Vec<(String, bool)>> {
+    if !spec.save.is_empty() {
+        return None; // saved images are whole frames
+    }
     let mut v = vec![];
     for m in &spec.measures {
         if m.params.get("input").is_some() {
             continue; // reads a captured image
         }
         match m.kind.as_str() {
-            "colorimetry" | "compare" | "convergence" => {}
+            "colorimetry" | "compare" | "compare-curve" | "convergence" => {}
             "sfr" => v.extend(m.of.iter().map(|o| (o.clone(), true))),
             "profile" | "mcc" if !m.of.is_empty() => {
                 v.extend(m.of.iter().map(|o| (o.clone(), false)))

@@ -43,6 +43,8 @@ pub const UNIT_SUFFIXES: &[&str] = &[
     "px",
     "lm",
     "db",
+    // the unit of the curve a property applies to (compare-curve's x-range)
+    "curve-unit",
 ];
 
 /// Dimensionless property names.

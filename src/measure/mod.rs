@@ -11,6 +11,7 @@
 
 pub mod colorimetry;
 pub mod compare;
+pub mod compare_curve;
 pub mod convergence;
 pub mod inputs;
 pub mod io;

@@ -10,6 +10,7 @@
 use super::Measured;
 use super::colorimetry::ColorimetryOptions;
 use super::compare::CompareOptions;
+use super::compare_curve::CompareCurveOptions;
 use super::convergence::ConvergenceOptions;
 use super::mcc::MccRequest;
 use super::noise::NoiseRequest;
@@ -32,6 +33,7 @@ pub const KINDS: &[&str] = &[
     "profile",
     "mcc",
     "compare",
+    "compare-curve",
     "convergence",
 ];
 
@@ -45,6 +47,7 @@ pub fn schema(kind: &str) -> Option<&'static Schema> {
         "profile" => &super::profile::SCHEMA,
         "mcc" => &super::mcc::SCHEMA,
         "compare" => &super::compare::SCHEMA,
+        "compare-curve" => &super::compare_curve::SCHEMA,
         "convergence" => &super::convergence::SCHEMA,
         _ => return None,
     })
@@ -65,6 +68,7 @@ pub enum MeasureOptions {
     Profile(ProfileRequest),
     Mcc(MccRequest),
     Compare(CompareOptions),
+    CompareCurve(CompareCurveOptions),
     Convergence(ConvergenceOptions),
 }
 
@@ -91,6 +95,9 @@ pub fn options(kind: &str, params: &Params, base_dir: &Path) -> Result<MeasureOp
         "profile" => MeasureOptions::Profile(super::profile::from_params(&d)?),
         "mcc" => MeasureOptions::Mcc(super::mcc::from_params(&d)?),
         "compare" => MeasureOptions::Compare(super::compare::from_params(&d)?),
+        "compare-curve" => {
+            MeasureOptions::CompareCurve(super::compare_curve::from_params(&d, base_dir)?)
+        }
         "convergence" => MeasureOptions::Convergence(super::convergence::from_params(&d)?),
         _ => unreachable!("schema() knows the kind"),
     };
@@ -117,6 +124,7 @@ impl MeasureOptions {
             MeasureOptions::Profile(_) => "profile",
             MeasureOptions::Mcc(_) => "mcc",
             MeasureOptions::Compare(_) => "compare",
+            MeasureOptions::CompareCurve(_) => "compare-curve",
             MeasureOptions::Convergence(_) => "convergence",
         }
     }
@@ -143,6 +151,16 @@ impl MeasureOptions {
                 "compare needs reference=\"<measurement>\"",
             )
             .with_help("e.g. reference=\"mcc-measured\", a measurement of a captured image")),
+            MeasureOptions::CompareCurve(c) if c.curve.is_none() => Err(ParamError::section(
+                "compare-curve needs curve=\"<curve name>\"",
+            )
+            .with_help(
+                "e.g. curve=\"ri\" or curve=\"edge-near/mtf\": a curve of the of= measurement",
+            )),
+            MeasureOptions::CompareCurve(c) if c.reference.is_none() => Err(ParamError::section(
+                "compare-curve needs reference-file=\"….csv\"",
+            )
+            .with_help("a CSV with '#' comment lines, a header row and numeric columns")),
             MeasureOptions::Convergence(c) if c.spp.is_empty() => {
                 Err(ParamError::section("convergence needs spp=(…)")
                     .with_help("e.g. spp=(16 64 256): at least two increasing sample counts"))
@@ -166,7 +184,7 @@ pub struct Needs {
 /// kind measures sensor digital values.
 pub fn needs(kind: &str) -> Needs {
     match kind {
-        "colorimetry" => Needs::default(),
+        "colorimetry" | "compare" | "compare-curve" => Needs::default(),
         "ri" | "convergence" => Needs {
             optical_image: true,
             sensor_image: false,
@@ -234,14 +252,25 @@ pub fn run(name: &str, of: &[String], opts: &MeasureOptions, inp: &Inputs) -> Re
         }
         MeasureOptions::Ri(r) => {
             no_of()?;
+            if let Some(channel) = &r.channel {
+                // One CFA channel of the sensor image, black level subtracted
+                // (the paper's Fig. 5 reads the G plane).
+                let si = need_si()?;
+                let plane = Plane::from_sensor(si)?;
+                let (cx, cy) = r
+                    .center_px
+                    .unwrap_or((si.full_width as f64 / 2.0, si.full_height as f64 / 2.0));
+                let opts = super::ri::RiOptions {
+                    pixel_pitch_m: Some(si.pixel_pitch_m),
+                    center_px: Some((cx - si.window.x as f64, cy - si.window.y as f64)),
+                    bins: r.bins,
+                    channel: channel.clone(),
+                };
+                return super::ri::relative_illumination(&plane, &opts, name);
+            }
             let oi = inp.oi.ok_or_else(|| {
                 Error::invalid(format!("measurement '{name}' needs an optical image"))
             })?;
-            if r.channel.is_some() {
-                return Err(Error::invalid(format!(
-                    "measurement '{name}': ri of the optical image reads band-integrated irradiance; channel= applies to captured images (input=…)"
-                )));
-            }
             // band-integrated irradiance (W/m²) per pixel
             let n = oi.bands();
             let data: Vec<f64> = (0..oi.window.area() as usize)
@@ -263,12 +292,12 @@ pub fn run(name: &str, of: &[String], opts: &MeasureOptions, inp: &Inputs) -> Re
             };
             super::ri::relative_illumination(&plane, &opts, name)
         }
-        MeasureOptions::Compare(_) | MeasureOptions::Convergence(_) => {
-            Err(Error::invalid(format!(
-                "measurement '{name}': {} combines other measurements of the experiment",
-                opts.kind()
-            )))
-        }
+        MeasureOptions::Compare(_)
+        | MeasureOptions::CompareCurve(_)
+        | MeasureOptions::Convergence(_) => Err(Error::invalid(format!(
+            "measurement '{name}': {} combines other measurements of the experiment",
+            opts.kind()
+        ))),
     }
 }
 

@@ -55,7 +55,9 @@ impl RiOptions {
 #[derive(Clone, Debug)]
 pub struct RiRequest {
     pub bins: usize,
-    /// `channel`: None = "g" on a captured mosaic; refused on the optical image.
+    /// `channel`: None = "g" on a captured mosaic, the optical image on a
+    /// rendered variant; given on a rendered variant, that channel of the
+    /// simulated sensor image.
     pub channel: Option<String>,
     /// `center-px`: the optical centre in full-frame pixels (captured image:
     /// its pixels); None = the full-frame centre.
@@ -87,7 +89,7 @@ pub static SCHEMA: crate::params::Schema = crate::params::Schema {
             name: "channel",
             kind: Kind::Choice(&["r", "g", "b"]),
             default: "g",
-            doc: "CFA channel read on a captured image (input=); the optical image is band-integrated irradiance and takes none",
+            doc: "CFA channel read (black level subtracted): on a captured image (input=) default \"g\"; on a rendered variant it reads the simulated sensor image instead of the optical image's band-integrated irradiance",
             example: "\"r\"",
         },
     ],

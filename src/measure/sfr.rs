@@ -142,6 +142,8 @@ pub struct Sfr {
     pub rows_used: usize,
     /// RMS MTF from pixel noise alone at 0.5 cy/px (see `noise_floor`).
     pub noise_floor_nyquist: f64,
+    /// RMS MTF from pixel noise alone at each of `freq_cy_per_px`.
+    pub noise_floor: Vec<f64>,
     /// Its jackknife standard error.
     pub noise_floor_stderr: f64,
     pub transposed: bool,
@@ -220,7 +222,57 @@ impl Sfr {
             self.lsf_fwhm_px(),
             self.lsf_fwhm_stderr_px,
         ));
-        let curves = vec![
+        let curves = self.curves();
+        Measured {
+            figures,
+            curves,
+            pixels_read: vec![roi],
+        }
+    }
+
+    /// The curves as the paper plots them (Fig. 7): the ESF (px); the LSF
+    /// over the span where it is not negligible ([`Sfr::lsf_span`]), in µm
+    /// when the pixel pitch is known; the MTF up to the Nyquist frequency
+    /// (0.5 cy/px) in cy/mm when the pitch is known, with the RMS MTF that
+    /// pixel noise alone gives drawn beside it (`mtf#noise floor`), so a
+    /// reader sees where the curve is blur and where it is noise.
+    pub fn curves(&self) -> Vec<Curve> {
+        let (lo, hi) = self.lsf_span();
+        let um = self.pixel_pitch_m.map(|p| p * 1e6);
+        let keep: Vec<usize> = (0..self.esf_x_px.len())
+            .filter(|&i| self.esf_x_px[i] >= lo && self.esf_x_px[i] <= hi)
+            .collect();
+        let (lsf_x, lsf_y, x_unit, y_unit) = match um {
+            Some(u) => (
+                keep.iter().map(|&i| self.esf_x_px[i] * u).collect(),
+                keep.iter().map(|&i| self.lsf[i] / u).collect(),
+                "µm",
+                "1/µm",
+            ),
+            None => (
+                keep.iter().map(|&i| self.esf_x_px[i]).collect(),
+                keep.iter().map(|&i| self.lsf[i]).collect(),
+                "px",
+                "1/px",
+            ),
+        };
+        let nyq: Vec<usize> = (0..self.freq_cy_per_px.len())
+            .filter(|&i| self.freq_cy_per_px[i] <= 0.5 + 1e-9)
+            .collect();
+        let (f_scale, f_unit) = match self.pixel_pitch_m {
+            Some(p) => (1.0 / (p * 1e3), "cy/mm"),
+            None => (1.0, "cy/px"),
+        };
+        let f: Vec<f64> = nyq
+            .iter()
+            .map(|&i| self.freq_cy_per_px[i] * f_scale)
+            .collect();
+        let pick = |v: &[f64]| {
+            nyq.iter()
+                .map(|&i| v.get(i).copied().unwrap_or(0.0))
+                .collect()
+        };
+        vec![
             Curve::new(
                 "esf",
                 ("distance", "px"),
@@ -231,26 +283,72 @@ impl Sfr {
             ),
             Curve::new(
                 "lsf",
-                ("distance", "px"),
-                ("lsf", "1/px"),
-                self.esf_x_px.clone(),
-                self.lsf.clone(),
+                ("distance", x_unit),
+                ("lsf", y_unit),
+                lsf_x,
+                lsf_y,
                 vec![],
             ),
             Curve::new(
                 "mtf",
-                ("frequency", "cy/px"),
+                ("frequency", f_unit),
                 ("mtf", "1"),
-                self.freq_cy_per_px.clone(),
-                self.mtf.clone(),
-                self.mtf_stderr.clone(),
+                f.clone(),
+                pick(&self.mtf),
+                pick(&self.mtf_stderr),
             ),
-        ];
-        Measured {
-            figures,
-            curves,
-            pixels_read: vec![roi],
+            Curve::new(
+                "mtf#noise floor",
+                ("frequency", f_unit),
+                ("mtf", "1"),
+                f,
+                pick(&self.noise_floor),
+                vec![],
+            ),
+        ]
+    }
+
+    /// The span of the LSF that is not negligible, px: from the peak outward
+    /// to where the ESF has covered 0.5 % and 99.5 % of its step (normalised
+    /// by its plateaus), widened by half its width on each side and to at
+    /// least ±4 px, so the plot shows the blur, not ±150 px of noise.
+    pub fn lsf_span(&self) -> (f64, f64) {
+        let n = self.esf.len();
+        let x = &self.esf_x_px;
+        if n < 8 {
+            return (
+                x.first().copied().unwrap_or(0.0),
+                x.last().copied().unwrap_or(0.0),
+            );
         }
+        let q = n / 8;
+        let mean = |s: &[f64]| s.iter().sum::<f64>() / s.len() as f64;
+        let (a, b) = (mean(&self.esf[..q]), mean(&self.esf[n - q..]));
+        let step = b - a;
+        let peak = (0..n)
+            .max_by(|&i, &j| self.lsf[i].abs().total_cmp(&self.lsf[j].abs()))
+            .unwrap_or(n / 2);
+        let frac = |i: usize| {
+            if step == 0.0 {
+                0.5
+            } else {
+                (self.esf[i] - a) / step
+            }
+        };
+        let mut l = peak;
+        while l > 0 && frac(l) > 0.005 {
+            l -= 1;
+        }
+        let mut r = peak;
+        while r + 1 < n && frac(r) < 0.995 {
+            r += 1;
+        }
+        let (xl, xr, xp) = (x[l], x[r], x[peak]);
+        let half = 0.5 * (xr - xl);
+        (
+            (xl - half).min(xp - 4.0).max(x[0]),
+            (xr + half).max(xp + 4.0).min(x[n - 1]),
+        )
     }
 
     /// Full width at half maximum of the LSF, px (linear interpolation).
@@ -832,6 +930,7 @@ pub fn sfr(plane: &Plane, opts: &SfrOptions) -> Result<Sfr> {
         lsf_fwhm_stderr_px: se_fwhm,
         rows_used: nlin,
         noise_floor_nyquist: floor_check,
+        noise_floor: full.noise_floor,
         noise_floor_stderr: se_floor,
         transposed,
         pixel_pitch_m: opts.pixel_pitch_m,

@@ -14,9 +14,13 @@ use crate::{Error, Result};
 /// prescription, RTF file, or a prescription through an RTF fitted on the fly.
 pub fn build(model: &CameraModel, film: &FilmSpec) -> Result<Box<dyn Camera>> {
     match model {
-        CameraModel::Pinhole { fov_deg, f_number } => {
-            Ok(Box::new(Pinhole::new(*fov_deg, *f_number, film)?))
-        }
+        CameraModel::Pinhole {
+            fov_deg,
+            f_number,
+            cos4,
+        } => Ok(Box::new(
+            Pinhole::new(*fov_deg, *f_number, film)?.with_cos4(*cos4),
+        )),
         CameraModel::ThinLens {
             focal_length_m,
             f_number,

@@ -22,6 +22,9 @@ pub struct Pinhole {
     pub f_number: f64,
     /// Pinhole-to-film distance, metres.
     pub film_distance_m: f64,
+    /// Weight the irradiance by cos⁴θ (natural vignetting); false: the
+    /// on-axis irradiance πL/(4N²) everywhere.
+    pub cos4: bool,
 }
 
 impl Pinhole {
@@ -48,7 +51,13 @@ impl Pinhole {
             fov_deg,
             f_number,
             film_distance_m,
+            cos4: true,
         })
+    }
+
+    /// With or without the cos⁴θ fall-off.
+    pub fn with_cos4(self, cos4: bool) -> Self {
+        Self { cos4, ..self }
     }
 }
 
@@ -58,7 +67,8 @@ impl Camera for Pinhole {
         let len = v.length();
         let cos = self.film_distance_m / len;
         let c2 = cos * cos;
-        let weight = std::f64::consts::PI / (4.0 * self.f_number * self.f_number) * c2 * c2;
+        let falloff = if self.cos4 { c2 * c2 } else { 1.0 };
+        let weight = std::f64::consts::PI / (4.0 * self.f_number * self.f_number) * falloff;
         Some(CameraRay {
             origin: DVec3::ZERO,
             direction: v / len,
@@ -70,8 +80,15 @@ impl Camera for Pinhole {
     }
     fn describe(&self) -> String {
         format!(
-            "pinhole fov {}° f/{} (film distance {:.6} m)",
-            self.fov_deg, self.f_number, self.film_distance_m
+            "pinhole fov {}° f/{} (film distance {:.6} m){}",
+            self.fov_deg,
+            self.f_number,
+            self.film_distance_m,
+            if self.cos4 {
+                ""
+            } else {
+                ", no cos⁴ fall-off"
+            }
         )
     }
 }

@@ -297,6 +297,7 @@ pub fn mitsuba_cornell_box() -> (Scene, FilmSpec) {
         model: CameraModel::Pinhole {
             fov_deg: 39.3077,
             f_number: 1.0,
+            cos4: true,
         },
     });
     let film = FilmSpec {

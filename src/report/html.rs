@@ -4,8 +4,10 @@
 //! a strict Content-Security-Policy forbids any network access.
 //!
 //! Plots: every curve name of a measurement becomes one chart with one
-//! series per variant (curves named `*_vs_time` on log–log axes; `scatter`
-//! with the identity line; `std_vs_mean` as points). When the variants sweep a
+//! series per variant; curves named `chart#series` (an overlay: simulated,
+//! reference, noise floor) are series of one chart `chart`. Curves named
+//! `*_vs_time` are drawn on log–log axes, `scatter` with the identity line,
+//! `std_vs_mean` as points. When the variants sweep a
 //! numeric parameter, each figure of a measurement with at most 10 figures is
 //! also plotted against it, with ±1 se. Tables have a row per variant, or a
 //! row per quantity when a measurement has more than 10 (e.g. MCC means).
@@ -137,6 +139,8 @@ struct MeasOut {
 struct ImageOut {
     svg: String,
     caption: String,
+    /// Files saved beside the pictures (`save "dng"`): (relative link, name).
+    files: Vec<(String, String)>,
 }
 
 fn read_manifest(dir: &Path) -> Result<Option<serde_json::Value>> {
@@ -213,6 +217,25 @@ fn images(dir: &Path, variants: &[String]) -> Result<Vec<ImageOut>> {
             .filter(|p| p.extension().is_some_and(|x| x == "png"))
             .collect();
         files.sort();
+        // Saved raw files (DNG) are linked from the first picture of their variant.
+        let mut saved: Vec<(String, String)> = std::fs::read_dir(&d)
+            .map_err(|e| Error::io(&d, e))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|x| x == "dng"))
+            .map(|p| {
+                let name = p
+                    .file_name()
+                    .map(|s| s.to_string_lossy().to_string())
+                    .unwrap_or_default();
+                let href = format!(
+                    "previews/{}/{}",
+                    url_path_segment(v),
+                    url_path_segment(&name)
+                );
+                (href, format!("{v}: {name} (raw mosaic, DNG)"))
+            })
+            .collect();
+        saved.sort();
         for f in files {
             let bytes = std::fs::read(&f).map_err(|e| Error::io(&f, e))?;
             let (w, h) = png_size(&bytes).ok_or_else(|| Error::io(&f, "not a PNG file"))?;
@@ -248,10 +271,23 @@ fn images(dir: &Path, variants: &[String]) -> Result<Vec<ImageOut>> {
             out.push(ImageOut {
                 svg,
                 caption: format!("{v}: {name}"),
+                files: std::mem::take(&mut saved),
             });
         }
     }
     Ok(out)
+}
+
+/// Percent-encode a path segment for an href (variant ids hold spaces, `(`, `=`, `,`).
+fn url_path_segment(s: &str) -> String {
+    s.bytes()
+        .map(|b| match b {
+            b'A'..=b'Z' | b'a'..=b'z' | b'0'..=b'9' | b'-' | b'_' | b'.' | b'~' => {
+                (b as char).to_string()
+            }
+            _ => format!("%{b:02X}"),
+        })
+        .collect()
 }
 
 fn html_escape(s: &str) -> String {
@@ -398,13 +434,36 @@ pub fn write_report(dir: &Path) -> Result<()> {
                 continue;
             }
             for c in read_curves(&p)? {
-                let e = by_name.entry(c.name.clone()).or_insert_with(|| {
-                    order.push(c.name.clone());
-                    (curve_spec(m, &c.name, &c), vec![])
+                // `chart#series` curves share one chart (an overlay); a series
+                // equal to one already drawn (a reference repeated by every
+                // variant) is drawn once, named by its tag alone.
+                let (chart, tag) = match c.name.split_once('#') {
+                    Some((a, b)) => (a.to_string(), Some(b.to_string())),
+                    None => (c.name.clone(), None),
+                };
+                let e = by_name.entry(chart.clone()).or_insert_with(|| {
+                    order.push(chart.clone());
+                    (curve_spec(m, &chart, &c), vec![])
                 });
+                let points: Vec<(f64, f64)> =
+                    c.x.iter().copied().zip(c.y.iter().copied()).collect();
+                let name = match &tag {
+                    Some(t) => format!("{v} · {t}"),
+                    None => v.clone(),
+                };
+                if let Some(t) = &tag {
+                    let suffix = format!(" · {t}");
+                    if let Some(s) =
+                        e.1.iter_mut()
+                            .find(|s| s.name.ends_with(&suffix) && s.points == points)
+                    {
+                        s.name = t.clone();
+                        continue;
+                    }
+                }
                 e.1.push(Series {
-                    name: v.clone(),
-                    points: c.x.iter().copied().zip(c.y.iter().copied()).collect(),
+                    name,
+                    points,
                     stderr: c.stderr.clone(),
                 });
             }

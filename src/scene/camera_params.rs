@@ -5,7 +5,7 @@
 //! the camera the renderer traces.
 //!
 //! - `lens "FILE" [film-distance-mm=D] [focus-distance-m=Z] [rtf-degree=N|"none"] [rtf-axis-weight=W]`
-//! - `lens model="pinhole" fov-deg=A [f-number=N]`
+//! - `lens model="pinhole" fov-deg=A [f-number=N] [falloff="cos4"|"none"]`
 //! - `lens model="thin-lens" focal-length-mm=F [f-number=N] [focus-distance-m=Z]`
 
 use super::model::{CameraModel, RtfFitRequest};
@@ -86,6 +86,13 @@ pub static LENS_MODEL_SCHEMA: Schema = Schema {
             doc: "thin lens: object distance in focus",
             example: "1.75",
         },
+        ParamSpec {
+            name: "falloff",
+            kind: Kind::Choice(&["cos4", "none"]),
+            default: "cos4",
+            doc: "pinhole: \"none\" leaves out the cos⁴ fall-off (irradiance πL/(4N²) everywhere), for a sensor whose relative-illumination table supplies the fall-off",
+            example: "\"none\"",
+        },
     ],
 };
 
@@ -147,6 +154,7 @@ fn inline_model(params: &Params) -> Result<CameraModel, ParamError> {
     let fov_deg = d.in_range("fov-deg", f64::MIN_POSITIVE, 179.9)?;
     let focal_length_m = d.positive("focal-length-mm")?.map(|mm| mm * 1e-3);
     let focus_distance_m = d.positive("focus-distance-m")?;
+    let falloff = d.choice("falloff")?;
     d.finish()?;
     let unused = |name: &str, v: Option<f64>| match v {
         Some(_) => Err(ParamError::new(
@@ -158,6 +166,12 @@ fn inline_model(params: &Params) -> Result<CameraModel, ParamError> {
     match model {
         "thin-lens" => {
             unused("fov-deg", fov_deg)?;
+            if falloff.is_some() {
+                return Err(ParamError::new(
+                    Some("falloff"),
+                    "'falloff' applies to lens model=\"pinhole\"",
+                ));
+            }
             let Some(focal_length_m) = focal_length_m else {
                 return Err(ParamError::section(
                     "lens model=\"thin-lens\" needs focal-length-mm",
@@ -175,7 +189,11 @@ fn inline_model(params: &Params) -> Result<CameraModel, ParamError> {
             let Some(fov_deg) = fov_deg else {
                 return Err(ParamError::section("lens model=\"pinhole\" needs fov-deg"));
             };
-            Ok(CameraModel::Pinhole { fov_deg, f_number })
+            Ok(CameraModel::Pinhole {
+                fov_deg,
+                f_number,
+                cos4: falloff != Some("none"),
+            })
         }
     }
 }

@@ -2,6 +2,7 @@
 
 pub mod camera_params;
 pub mod edits;
+pub mod intersections;
 pub mod kdl_scene;
 pub mod mesh_io;
 pub mod model;

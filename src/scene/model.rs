@@ -158,9 +158,15 @@ impl Default for CameraPose {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub enum CameraModel {
     /// Pinhole with a nominal f-number used only for the irradiance scale
-    /// (E = πL/(4N²)·cos⁴θ). `fov_deg` is the full field of view across the
-    /// shorter film side (pbrt's convention).
-    Pinhole { fov_deg: f64, f_number: f64 },
+    /// (E = πL/(4N²)·cos⁴θ, or πL/(4N²) without `cos4`: an ideal lens with no
+    /// natural vignetting, whose fall-off the sensor's relative illumination
+    /// supplies). `fov_deg` is the full field of view across the shorter film
+    /// side (pbrt's convention).
+    Pinhole {
+        fov_deg: f64,
+        f_number: f64,
+        cos4: bool,
+    },
     /// Ideal thin lens.
     ThinLens {
         focal_length_m: f64,

@@ -151,6 +151,10 @@ pub struct SensorConfig {
     /// Seed of the fixed-pattern fields (PRNU, DSNU, column FPN): a property of the
     /// sensor unit, independent of the per-frame seed.
     pub fpn_seed: u64,
+    /// A declared calibration factor on the optical image's irradiance before
+    /// the sensor (the paper's per-figure mean-illuminance scale factors,
+    /// `cornellbox_setup.json` render.illuminance_scale_factors); 1 = none.
+    pub illuminance_scale: f64,
 }
 
 /// Reset (kTC) noise of a sense node, volts: √(k_B·T / C) with C = q / conversion gain.
@@ -215,6 +219,7 @@ impl SensorConfig {
             relative_illumination: RelativeIllumination::None,
             sources: Sources::all(),
             fpn_seed: 1,
+            illuminance_scale: 1.0,
         }
     }
 
@@ -346,6 +351,7 @@ impl SensorConfig {
         p.set("column-fpn-offset-mv", n(self.column_fpn_offset_v * 1e3));
         p.set("column-fpn-gain-percent", n(self.column_fpn_gain * 100.0));
         p.set("fpn-seed", n(self.fpn_seed as f64));
+        p.set("illuminance-scale-factor", n(self.illuminance_scale));
         let s = &self.sources;
         for (k, v) in [
             ("photon-noise", s.photon_noise),

@@ -53,6 +53,38 @@ pub fn png16_bytes(width: u32, height: u32, samples: &[u16]) -> Result<Vec<u8>> 
     Ok(out)
 }
 
+/// The raw mosaic as an 8-bit grey picture for a report: DV above black over
+/// the white level above black, gamma 1/2.2 (the CFA pattern stays visible).
+pub fn mosaic_png_bytes(image: &SensorImage) -> Result<Vec<u8>> {
+    let (w, h) = (image.width() as usize, image.height() as usize);
+    let range = (image.white_level_dv - image.black_level_dv).max(1.0);
+    let px: Vec<u8> = image
+        .dv
+        .iter()
+        .map(|&v| {
+            let t = ((v as f64 - image.black_level_dv) / range).clamp(0.0, 1.0);
+            (t.powf(1.0 / 2.2) * 255.0).round() as u8
+        })
+        .collect();
+    if px.len() != w * h {
+        return Err(Error::invalid(
+            "mosaic picture: pixel count does not match the image",
+        ));
+    }
+    let mut out = vec![];
+    {
+        let mut enc = png::Encoder::new(&mut out, w as u32, h as u32);
+        enc.set_color(png::ColorType::Grayscale);
+        enc.set_depth(png::BitDepth::Eight);
+        let mut wr = enc
+            .write_header()
+            .map_err(|e| Error::invalid(format!("png: {e}")))?;
+        wr.write_image_data(&px)
+            .map_err(|e| Error::invalid(format!("png: {e}")))?;
+    }
+    Ok(out)
+}
+
 /// Write the raw mosaic DV as a 16-bit PNG (atomically).
 pub fn write_raw_png(path: &Path, image: &SensorImage) -> Result<()> {
     write_atomic(

@@ -47,7 +47,8 @@ pub struct SensorFrame {
 }
 
 /// Electrons per second per unit irradiance, per channel and band:
-/// `w[c][b]` = QE_c(λ_b)·λ_b/(hc)·Δλ·A_pixel·FF, in e⁻/s per W/(m²·nm).
+/// `w[c][b]` = k·QE_c(λ_b)·λ_b/(hc)·Δλ·A_pixel·FF, in e⁻/s per W/(m²·nm), with
+/// k the declared illuminance calibration factor (`illuminance-scale-factor`).
 #[allow(clippy::needless_range_loop)]
 pub fn channel_weights(cfg: &SensorConfig, grid: &WavelengthGrid) -> Vec<Vec<f64>> {
     let nch = cfg.cfa.channels.len();
@@ -56,7 +57,7 @@ pub fn channel_weights(cfg: &SensorConfig, grid: &WavelengthGrid) -> Vec<Vec<f64
     for b in 0..grid.len() {
         let l = grid.wavelength(b);
         let qe = cfg.effective_qe(l);
-        let k = grid.step_nm * area / units::photon_energy_j(l);
+        let k = cfg.illuminance_scale * grid.step_nm * area / units::photon_energy_j(l);
         for c in 0..nch {
             w[c][b] = qe[c] * k;
         }

@@ -272,7 +272,10 @@ pub fn read_ri_csv(p: &Path) -> Result<(Vec<f64>, Vec<f64>), String> {
         .next()
         .ok_or_else(|| format!("{}: empty file", p.display()))?;
     let cols: Vec<&str> = header.split(',').map(str::trim).collect();
-    let hi = cols.iter().position(|c| *c == "field_height_mm");
+    // `y_field_mm` is Zemax's name for the same column (its RI export).
+    let hi = cols
+        .iter()
+        .position(|c| *c == "field_height_mm" || *c == "y_field_mm");
     let vi = cols.iter().position(|c| *c == "relative_illumination");
     let (Some(hi), Some(vi)) = (hi, vi) else {
         return Err(format!(

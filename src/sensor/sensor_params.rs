@@ -204,6 +204,13 @@ pub static SCHEMA: Schema = Schema {
             "4242",
         ),
         ParamSpec::new(
+            "illuminance-scale-factor",
+            Kind::Number,
+            "1",
+            "Calibration: factor on the optical image's irradiance before the sensor (the paper's per-figure mean-illuminance factors; > 0); recorded in the manifest and the report",
+            "0.57",
+        ),
+        ParamSpec::new(
             "photon-noise",
             Kind::Bool,
             "#true",
@@ -432,6 +439,11 @@ pub(super) fn set_property(
         "column-fpn-gain-percent" => {
             if let Some(x) = d.nonneg(name)? {
                 cfg.column_fpn_gain = x / 100.0;
+            }
+        }
+        "illuminance-scale-factor" => {
+            if let Some(x) = d.positive(name)? {
+                cfg.illuminance_scale = x;
             }
         }
         "fpn-seed" => {

@@ -87,6 +87,29 @@ pub fn probe(kind: &str, name: &str, opts: &MeasureOptions) -> Option<Value> {
             "normalize" => text(if c.normalize_mean { "mean" } else { "none" }),
             _ => None,
         },
+        ("compare-curve", MeasureOptions::CompareCurve(c)) => match name {
+            "curve" => c.curve.as_deref().and_then(text),
+            "reference-file" => c.reference.as_ref().and_then(|r| {
+                // the path as written, relative to the project root it was found in
+                let p = r.file.to_string_lossy();
+                text(&p[p.find("lenses/").unwrap_or(0)..])
+            }),
+            "x-column" => c.reference.as_ref().and_then(|r| text(&r.x_name)),
+            "y-column" => c.reference.as_ref().and_then(|r| text(&r.y_name)),
+            "reference-filter" => c
+                .reference_filter
+                .as_ref()
+                .and_then(|(k, v)| text(&format!("{k}={v}"))),
+            "reference-y-scale-factor" => num(c.reference_y_scale),
+            "x-unit" => c.x_unit.as_deref().and_then(text),
+            "normalize" => text(match c.normalize {
+                camsim::measure::compare_curve::Normalize::Max => "max",
+                camsim::measure::compare_curve::Normalize::None => "none",
+            }),
+            "x-range-curve-unit" => c.x_range.and_then(|(a, b)| list(&[a, b])),
+            "crossing-level" => c.crossing_level.and_then(num),
+            _ => None,
+        },
         ("convergence", MeasureOptions::Convergence(c)) => match name {
             "spp" => list(&c.spp.iter().map(|s| *s as f64).collect::<Vec<_>>()),
             "reference-spp" => c.reference_spp.and_then(|s| num(s as f64)),

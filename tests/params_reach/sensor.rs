@@ -78,6 +78,7 @@ pub fn probe(name: &str, cfg: &SensorConfig) -> Option<Value> {
         "column-fpn-offset-mv" => n(cfg.column_fpn_offset_v * 1e3),
         "column-fpn-gain-percent" => n(cfg.column_fpn_gain * 100.0),
         "fpn-seed" => n(cfg.fpn_seed as f64),
+        "illuminance-scale-factor" => n(cfg.illuminance_scale),
         "photon-noise" => Value::Bool(s.photon_noise),
         "dark-current" => Value::Bool(s.dark_current),
         "dsnu" => Value::Bool(s.dsnu),

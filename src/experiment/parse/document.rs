@@ -430,6 +430,10 @@ impl P {
                     self.no_children(file, n)?;
                     spec.sanity = Some(self.parse_sanity(file, n)?);
                 }
+                "save" => {
+                    self.no_children(file, n)?;
+                    spec.save = self.parse_save(file, n)?;
+                }
                 "measured" => {
                     self.no_children(file, n)?;
                     let c = self.parse_measured(file, n, &dir)?;

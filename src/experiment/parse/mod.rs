@@ -50,6 +50,7 @@ const EXPERIMENT_NODES: &[&str] = &[
     "measure",
     "measured",
     "sanity",
+    "save",
 ];
 const SINGLETONS: &[&str] = &[
     "description",
@@ -61,6 +62,7 @@ const SINGLETONS: &[&str] = &[
     "render",
     "sweep",
     "sanity",
+    "save",
 ];
 const MAX_BASE_DEPTH: usize = 16;
 

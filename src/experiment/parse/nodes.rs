@@ -429,6 +429,48 @@ impl P {
         })
     }
 
+    /// `save "dng" …`: extra images written for every variant (see
+    /// [`super::super::spec::SAVE_KINDS`]); no properties.
+    pub(super) fn parse_save(&self, file: usize, n: &KdlNode) -> Result<Vec<String>, Located> {
+        let sp = self.node_span(file, n);
+        let kinds = super::super::spec::SAVE_KINDS;
+        let mut out: Vec<String> = vec![];
+        for e in self.entries(file, n)? {
+            let at = e.name.as_ref().map(|(_, s)| *s).unwrap_or(e.vspan);
+            match (&e.name, &e.value) {
+                (None, Value::String(k)) if kinds.contains(&k.as_str()) => {
+                    if out.contains(k) {
+                        return Err(self.e(e.vspan, format!("'{k}' is listed twice")));
+                    }
+                    out.push(k.clone());
+                }
+                (None, v) => {
+                    return Err(self
+                        .e(
+                            at,
+                            format!("save {}: expected one of {kinds:?}", apply::describe(v)),
+                        )
+                        .with_help_opt(match v {
+                            Value::String(s) => crate::diag::did_you_mean(s, kinds.iter().copied())
+                                .map(|x| format!("did you mean '{x}'?")),
+                            _ => None,
+                        }));
+                }
+                (Some((k, _)), _) => {
+                    return Err(self
+                        .e(at, format!("'save' takes no properties, found '{k}'"))
+                        .with_help("write save \"dng\""));
+                }
+            }
+        }
+        if out.is_empty() {
+            return Err(self
+                .e(sp, "'save' needs what to save")
+                .with_help(format!("one or more of {kinds:?}, e.g. save \"dng\"")));
+        }
+        Ok(out)
+    }
+
     /// `sanity "pov" [min-iou=…] [width-px=…] [height-px=…] [through=…]`.
     pub(super) fn parse_sanity(&self, file: usize, n: &KdlNode) -> Result<Measure, Located> {
         let sp = self.node_span(file, n);

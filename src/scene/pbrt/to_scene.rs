@@ -201,6 +201,7 @@ pub fn camera(
                 CameraModel::Pinhole {
                     fov_deg: *fov_deg,
                     f_number: PI.sqrt() / 2.0,
+                    cos4: true,
                 }
             }
         }
