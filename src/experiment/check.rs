@@ -52,6 +52,10 @@ pub fn check_stages(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError)>
     if let Some(s) = &spec.sanity {
         crate::pov::check_params::pov_check(&s.params).map_err(|e| located(e, &s.spans, s.span))?;
     }
+    for m in &spec.summaries {
+        crate::summary::checked(&m.kind, &m.params, dir)
+            .map_err(|e| located(e, &m.spans, m.span))?;
+    }
     for o in &spec.overrides {
         crate::scene::edits::check_override(&o.params, dir)
             .map_err(|e| located(e, &o.spans, o.span))?;

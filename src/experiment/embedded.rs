@@ -21,7 +21,9 @@ macro_rules! embed {
 pub const EXPERIMENTS: &[(&str, &str)] = &[
     embed!("cornell-box.kdl"),
     embed!("e2e-quick.kdl"),
+    embed!("fig03-qe-correction.kdl"),
     embed!("fig07-lsf-mtf.kdl"),
+    embed!("fig10-chromatic.kdl"),
     embed!("rtf-vs-prescription.kdl"),
     embed!("smoke.kdl"),
 ];

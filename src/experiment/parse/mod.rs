@@ -50,6 +50,7 @@ const EXPERIMENT_NODES: &[&str] = &[
     "measure",
     "measured",
     "sanity",
+    "summary",
 ];
 const SINGLETONS: &[&str] = &[
     "description",
