@@ -55,6 +55,12 @@ pub fn check_stages(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError)>
     for m in &spec.summaries {
         crate::summary::checked(&m.kind, &m.params, dir)
             .map_err(|e| located(e, &m.spans, m.span))?;
+        if m.of.is_empty() {
+            let e =
+                ParamError::section(format!("summary \"{}\" needs of=\"<measurement>\"", m.kind))
+                    .with_help("of= names the measurement whose rows it reads across the variants");
+            return Err(located(e, &m.spans, m.span));
+        }
     }
     for o in &spec.overrides {
         crate::scene::edits::check_override(&o.params, dir)

@@ -42,7 +42,7 @@ pub const fn name_param() -> ParamSpec {
         "name",
         Kind::Text,
         "the kind",
-        "the summary's name: the `measurement` column of its rows (variant `summary`) and `curves/summary/<name>.csv`; unique among the experiment's measure and summary names (no '.' or ',')",
+        "the summary's name: the `measurement` column of its rows (variant `summary`) and `curves/summary/<name>.csv`; unique among the experiment's measure and summary names (no '.', ',' or '/')",
         "\"s-probe\"",
     )
 }

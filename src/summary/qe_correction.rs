@@ -391,3 +391,136 @@ pub fn run(
     }
     Ok(out)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Rows of `measure "mcc"` for patches 1…24 under 3 lights, nominal values
+    /// from a fixed pseudo-random sequence and measured = nominal·M (+ noise).
+    fn rows(m: &[[f64; 3]; 3], noise: f64) -> Vec<ResultRow> {
+        let mut out = vec![];
+        let mut s = 12345u64;
+        let mut rnd = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let ch = ["r", "g", "b"];
+        for light in ["a", "cwf", "day"] {
+            for patch in 1..=24 {
+                let nom: Vec<f64> = (0..3).map(|_| 20.0 + 500.0 * rnd()).collect();
+                for (qe, vals) in [
+                    ("nominal", nom.clone()),
+                    (
+                        "corrected",
+                        (0..3)
+                            .map(|c| {
+                                (0..3).map(|r| nom[r] * m[r][c]).sum::<f64>()
+                                    + noise * (rnd() - 0.5)
+                            })
+                            .collect(),
+                    ),
+                ] {
+                    for c in 0..3 {
+                        out.push(ResultRow {
+                            experiment: "e".into(),
+                            variant: format!("{light},{qe}"),
+                            params: vec![
+                                ("light".into(), light.into()),
+                                ("tag.qe".into(), qe.into()),
+                            ],
+                            measurement: "mcc".into(),
+                            quantity: format!("patch{patch:02}/{}_mean", ch[c]),
+                            unit: "DV".into(),
+                            value: vals[c],
+                            stderr: 0.1,
+                            render_s: 0.0,
+                            total_s: 0.0,
+                        });
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    fn opts() -> QeCorrectionOptions {
+        QeCorrectionOptions {
+            axis: Some("tag.qe".into()),
+            measured: Some("corrected".into()),
+            nominal: Some("nominal".into()),
+            exclude: vec![3, 6, 10, 11, 14, 19],
+            ..Default::default()
+        }
+    }
+
+    const M: [[f64; 3]; 3] = [
+        [0.5636, 0.0807, 0.0069],
+        [0.0, 0.5917, 0.0],
+        [0.0, 0.247, 0.7098],
+    ];
+
+    #[test]
+    fn nnls_recovers_m_from_paired_rows() {
+        let rows = rows(&M, 0.0);
+        let r: Vec<&ResultRow> = rows.iter().collect();
+        let axes = vec!["light".to_string(), "tag.qe".to_string()];
+        let out = run("qe", &opts(), &axes, &r).unwrap();
+        let fig = |q: &str| out.figures.iter().find(|f| f.quantity == q).unwrap();
+        let ch = ["r", "g", "b"];
+        for (i, a) in ch.iter().enumerate() {
+            for (j, b) in ch.iter().enumerate() {
+                let f = fig(&format!("M_{a}_{b}"));
+                assert!((f.value - M[i][j]).abs() < 1e-9, "{f:?}");
+                assert!(f.value >= 0.0);
+            }
+        }
+        assert_eq!(fig("pairs").value, 54.0, "3 lights × 18 patches");
+        assert!(fig("fit_error_percent").value < 1e-9);
+        // QE curves need sensor=; the scatters are there
+        assert!(out.curves.iter().any(|c| c.name == "scatter-after/g"));
+    }
+
+    #[test]
+    fn noise_gives_jackknife_errors_that_cover_the_truth() {
+        // ±2.5 DV uniform noise (σ = 5/√12 ≈ 1.44 DV) on values 20…520 DV.
+        let rows = rows(&M, 5.0);
+        let r: Vec<&ResultRow> = rows.iter().collect();
+        let axes = vec!["light".to_string(), "tag.qe".to_string()];
+        let out = run("qe", &opts(), &axes, &r).unwrap();
+        for f in out.figures.iter().filter(|f| f.quantity.starts_with("M_")) {
+            let (a, b) = f.quantity[2..].split_once('_').unwrap();
+            let idx = |c: &str| ["r", "g", "b"].iter().position(|x| *x == c).unwrap();
+            let truth = M[idx(a)][idx(b)];
+            // 4 jackknife standard errors, or the NNLS bound at 0 (a true 0 entry
+            // is pinned to ≥ 0, its estimate within a few se of it).
+            assert!(
+                (f.value - truth).abs() <= 4.0 * f.stderr + 1e-12,
+                "{f:?} vs {truth}"
+            );
+            if truth > 0.0 {
+                assert!(f.stderr > 0.0, "{f:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn unpaired_or_unswept_axes_are_errors() {
+        let rows = rows(&M, 0.0);
+        let r: Vec<&ResultRow> = rows.iter().collect();
+        let e = run("qe", &opts(), &["light".to_string()], &r).unwrap_err();
+        assert!(e.to_string().contains("not swept"), "{e}");
+        let o = QeCorrectionOptions {
+            measured: Some("capture".into()),
+            ..opts()
+        };
+        let axes = vec!["light".to_string(), "tag.qe".to_string()];
+        let e = run("qe", &o, &axes, &r).unwrap_err();
+        assert!(
+            e.to_string().contains("values present: nominal, corrected"),
+            "{e}"
+        );
+    }
+}

@@ -470,7 +470,10 @@ impl P {
                         self.where_(*prev)
                     )));
             }
-            let of = m.of.first().map(String::as_str).unwrap_or("");
+            // (a missing of= is reported by check, after misspelt properties)
+            let Some(of) = m.of.first().map(String::as_str) else {
+                continue;
+            };
             if !spec.measures.iter().any(|x| x.name == of) {
                 let at = m.spans.values.get("of").copied().unwrap_or(m.span);
                 let names: Vec<&str> = spec.measures.iter().map(|x| x.name.as_str()).collect();

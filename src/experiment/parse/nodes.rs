@@ -545,11 +545,6 @@ impl P {
                     kinds.join(", ")
                 )));
         };
-        if m.of.is_empty() {
-            return Err(self
-                .e(sp, format!("summary \"{kind}\" needs of=\"<measurement>\""))
-                .with_help("of= names the measurement whose rows it reads across variants"));
-        }
         m.name = name.unwrap_or_else(|| kind.clone());
         m.kind = kind;
         Ok(m)
