@@ -1,7 +1,8 @@
 //! The cross-variant stage: once every variant of a plan has results (a full
 //! run, the shard run that completes the plan, or `camsim merge`), each
-//! `summary` node of the experiment reads the assembled rows (and nothing
-//! else) and adds its own: `variant` = `summary`, empty swept columns,
+//! `summary` node of the experiment reads the assembled rows of its
+//! measurement and that measurement's curves (`curves/<variant>/<of>.csv`)
+//! and adds its own: `variant` = `summary`, empty swept columns,
 //! `render_s` 0 and `total_s` the summary's own time, so `camsim diff` and
 //! the baselines treat them like any row. Its curves go to
 //! `curves/summary/<name>.csv`. Summaries are always recomputed (they are
@@ -10,7 +11,7 @@
 
 use crate::figure::Figure;
 use crate::params::Params;
-use crate::report::results::{parse_results, write_curves};
+use crate::report::results::{parse_results, read_curves, write_curves};
 use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -98,7 +99,21 @@ pub fn append(
         let t = Instant::now();
         let r = crate::summary::checked(&s.kind, &s.params, dir)
             .map_err(|e| Error::invalid(format!("summary '{}': {}", s.name, e.message)))
-            .and_then(|o| crate::summary::run(&s.name, &s.of, &o, axes, &rows));
+            .and_then(|o| {
+                let curves_of = |variant: &str| -> Result<Option<Vec<crate::measure::Curve>>> {
+                    let p = root
+                        .join("curves")
+                        .join(variant)
+                        .join(format!("{}.csv", s.of));
+                    if p.exists() {
+                        read_curves(&p).map(Some)
+                    } else {
+                        Ok(None)
+                    }
+                };
+                let input = crate::summary::SummaryInput::new(&s.of, axes, &rows, curves_of)?;
+                crate::summary::run(&s.name, &s.of, &o, &input)
+            });
         match r {
             Ok(m) => {
                 if let Some(f) = m

@@ -1,7 +1,8 @@
 //! Cross-variant summaries: `summary "<kind>" of="<measurement>" …` inside an
 //! `experiment`. A summary runs once every variant of the plan has results;
 //! it reads the rows of one measurement across all variants (variant, swept
-//! values, quantity, value, standard error) and returns its own figures and
+//! values, quantity, value, standard error) and that measurement's curves
+//! ([`SummaryInput`]), and returns its own figures and
 //! curves, which the experiment layer writes with `variant` = `summary`
 //! (`experiment::summary`).
 //!
@@ -14,9 +15,10 @@ pub mod qe_correction;
 pub mod steps;
 
 use crate::Result;
-use crate::measure::Measured;
+use crate::measure::{Curve, Measured};
 use crate::params::{Kind, ParamDict, ParamError, ParamSpec, Params, Schema};
 use crate::report::results::ResultRow;
+use std::collections::BTreeMap;
 use std::path::Path;
 
 /// The kinds of `summary "<kind>"`, in the order of the language reference.
@@ -120,23 +122,90 @@ pub fn checked(
     Ok(o)
 }
 
-/// Run summary `name` on the rows of measurement `of` (every variant's rows
-/// of that measurement, in plan order; `axes` are the results' swept columns).
-pub fn run(
-    name: &str,
-    of: &str,
-    opts: &SummaryOptions,
-    axes: &[String],
-    rows: &[ResultRow],
-) -> Result<Measured> {
-    let rows: Vec<&ResultRow> = rows.iter().filter(|r| r.measurement == of).collect();
-    if rows.is_empty() {
+/// What a summary reads: the rows of its measurement `of` across every
+/// variant (plan order) and that measurement's curves per variant.
+pub struct SummaryInput<'a> {
+    /// The results' swept columns.
+    pub axes: &'a [String],
+    /// Every variant's rows of `of`.
+    pub rows: Vec<&'a ResultRow>,
+    /// Curves of `of` by variant id (variants that wrote none are absent).
+    pub curves: BTreeMap<String, Vec<Curve>>,
+}
+
+impl<'a> SummaryInput<'a> {
+    /// The rows of `of` among `all`, and the curves `curves_of(variant)` finds.
+    pub fn new(
+        of: &str,
+        axes: &'a [String],
+        all: &'a [ResultRow],
+        curves_of: impl Fn(&str) -> Result<Option<Vec<Curve>>>,
+    ) -> Result<Self> {
+        let rows: Vec<&ResultRow> = all.iter().filter(|r| r.measurement == of).collect();
+        let mut curves = BTreeMap::new();
+        for r in &rows {
+            if !curves.contains_key(&r.variant)
+                && let Some(c) = curves_of(&r.variant)?
+            {
+                curves.insert(r.variant.clone(), c);
+            }
+        }
+        Ok(Self { axes, rows, curves })
+    }
+}
+
+/// Run summary `name` on its input (the rows and curves of measurement `of`).
+pub fn run(name: &str, of: &str, opts: &SummaryOptions, input: &SummaryInput) -> Result<Measured> {
+    if input.rows.is_empty() {
         return Err(crate::Error::invalid(format!(
             "summary '{name}': no rows of measurement '{of}' in the results"
         )));
     }
+    let (axes, rows) = (input.axes, &input.rows);
     match opts {
-        SummaryOptions::QeCorrection(o) => qe_correction::run(name, o, axes, &rows),
-        SummaryOptions::Steps(o) => steps::run(name, o, axes, &rows),
+        SummaryOptions::QeCorrection(o) => qe_correction::run(name, o, axes, rows),
+        SummaryOptions::Steps(o) => steps::run(name, o, axes, rows),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(variant: &str, measurement: &str) -> ResultRow {
+        ResultRow {
+            experiment: "e".into(),
+            variant: variant.into(),
+            params: vec![("tag.a".into(), variant.into())],
+            measurement: measurement.into(),
+            quantity: "q".into(),
+            unit: "1".into(),
+            value: 1.0,
+            stderr: 0.0,
+            render_s: 0.0,
+            total_s: 0.0,
+        }
+    }
+
+    #[test]
+    fn input_holds_the_rows_and_curves_of_its_measurement() {
+        let all = vec![row("a=1", "m"), row("a=1", "other"), row("a=2", "m")];
+        let axes = vec!["tag.a".to_string()];
+        let input = SummaryInput::new("m", &axes, &all, |v| {
+            Ok((v == "a=2").then(|| {
+                vec![Curve::new(
+                    "c",
+                    ("x", "1"),
+                    ("y", "1"),
+                    vec![0.0],
+                    vec![1.0],
+                    vec![],
+                )]
+            }))
+        })
+        .unwrap();
+        assert_eq!(input.rows.len(), 2);
+        assert!(input.rows.iter().all(|r| r.measurement == "m"));
+        assert_eq!(input.curves.keys().collect::<Vec<_>>(), vec!["a=2"]);
     }
 }
