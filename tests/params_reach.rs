@@ -123,6 +123,7 @@ impl Case {
         );
         for node in [
             "camera", "lens", "render", "override", "add", "measured", "measure", "sanity",
+            "summary",
         ] {
             if let Some(p) = self.nodes.get(node) {
                 s.push_str(&format!("    {node}{}\n", fmt_props(p)));
@@ -253,6 +254,27 @@ fn setup(schema: &Schema, p: &ParamSpec, c: &mut Case) -> &'static str {
         c.set("sanity", p.name, ex);
         return "sanity";
     }
+    if let Some(k) = node.strip_prefix("summary ") {
+        let kind = k.trim_matches('"');
+        c.replace(
+            "summary",
+            vec![("", &format!("\"{kind}\"")), ("of", "\"colorimetry\"")],
+        );
+        c.set("summary", "axis", "\"tag.a\"");
+        match kind {
+            "qe-correction" => {
+                c.set("summary", "measured", "\"m\"");
+                c.set("summary", "nominal", "\"n\"");
+            }
+            _ => c.set("summary", "reference", "\"r\""),
+        }
+        if p.name == "of" {
+            // of= names a measurement of the experiment: give it the example's name
+            c.set("measure", "name", p.example);
+        }
+        c.set("summary", p.name, ex);
+        return "summary";
+    }
     if let Some(k) = node.strip_prefix("measure ") {
         let kind = k.trim_matches('"');
         c.replace("measure", vec![("", &format!("\"{kind}\""))]);
@@ -317,6 +339,8 @@ fn write_side_files(dir: &Path) {
     // relative mesh files (`scenes/bunny.obj`) resolve from the experiment's directory
     std::os::unix::fs::symlink(Path::new(ROOT).join("scenes"), dir.join("scenes")).unwrap();
     std::os::unix::fs::symlink(Path::new(ROOT).join("lenses"), dir.join("lenses")).unwrap();
+    // the nominal sensor file of `summary "qe-correction" sensor=…`
+    std::os::unix::fs::symlink(Path::new(ROOT).join("sensors"), dir.join("sensors")).unwrap();
 }
 
 fn parse(dir: &Path, text: &str) -> Result<experiment::plan::Plan, String> {
@@ -562,6 +586,40 @@ fn probe(
                 "height-px" => o.height_px.map(|x| x as f64).and_then(num),
                 "through" => text(if o.through_lens { "lens" } else { "pinhole" }),
                 _ => None,
+            }
+        }
+        n if n.starts_with("summary ") => {
+            let m = &spec.summaries[0];
+            match p.name {
+                "name" => text(&m.name),
+                "of" => m.of.first().and_then(|s| text(s)),
+                _ => {
+                    use camsim::summary::SummaryOptions as S;
+                    let o = camsim::summary::options(&m.kind, &m.params, dir)
+                        .map_err(|x| x.to_string())?;
+                    let t = |s: &Option<String>| s.as_deref().and_then(text);
+                    match (&o, p.name) {
+                        (S::QeCorrection(q), "note") => t(&q.note),
+                        (S::Steps(q), "note") => t(&q.note),
+                        (S::QeCorrection(q), "axis") => t(&q.axis),
+                        (S::Steps(q), "axis") => t(&q.axis),
+                        (S::QeCorrection(q), "measured") => t(&q.measured),
+                        (S::QeCorrection(q), "nominal") => t(&q.nominal),
+                        (S::QeCorrection(q), "exclude-patch-number") => Some(Value::List(
+                            q.exclude.iter().map(|&x| Value::Number(x as f64)).collect(),
+                        )),
+                        // the file as found from the experiment's directory
+                        (S::QeCorrection(q), "sensor") => q
+                            .sensor
+                            .as_ref()
+                            .and_then(|f| f.strip_prefix(dir).ok())
+                            .and_then(|f| text(&f.to_string_lossy())),
+                        (S::Steps(q), "reference") => t(&q.reference),
+                        (S::Steps(q), "quantity") => text(&q.quantity),
+                        (S::Steps(q), "histogram-bin-dv") => num(q.bin),
+                        _ => None,
+                    }
+                }
             }
         }
         n if n.starts_with("measure ") => {

@@ -52,6 +52,16 @@ pub fn check_stages(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError)>
     if let Some(s) = &spec.sanity {
         crate::pov::check_params::pov_check(&s.params).map_err(|e| located(e, &s.spans, s.span))?;
     }
+    for m in &spec.summaries {
+        crate::summary::checked(&m.kind, &m.params, dir)
+            .map_err(|e| located(e, &m.spans, m.span))?;
+        if m.of.is_empty() {
+            let e =
+                ParamError::section(format!("summary \"{}\" needs of=\"<measurement>\"", m.kind))
+                    .with_help("of= names the measurement whose rows it reads across the variants");
+            return Err(located(e, &m.spans, m.span));
+        }
+    }
     for o in &spec.overrides {
         crate::scene::edits::check_override(&o.params, dir)
             .map_err(|e| located(e, &o.spans, o.span))?;

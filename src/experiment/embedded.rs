@@ -21,10 +21,12 @@ macro_rules! embed {
 pub const EXPERIMENTS: &[(&str, &str)] = &[
     embed!("cornell-box.kdl"),
     embed!("e2e-quick.kdl"),
+    embed!("fig03-qe-correction.kdl"),
     embed!("fig04-qualitative.kdl"),
     embed!("fig05-relative-illumination.kdl"),
     embed!("fig07-lsf-mtf.kdl"),
     embed!("fig09-interreflection.kdl"),
+    embed!("fig10-chromatic.kdl"),
     embed!("rtf-vs-prescription.kdl"),
     embed!("smoke.kdl"),
 ];

@@ -130,6 +130,7 @@ pub fn schemas() -> Vec<&'static Schema> {
     v.extend(crate::measure::request::schemas());
     v.push(&MEASURED_SCHEMA);
     v.push(&crate::pov::check_params::SCHEMA);
+    v.extend(crate::summary::schemas());
     v
 }
 

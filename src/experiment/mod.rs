@@ -11,6 +11,7 @@
 //! - [`stages`]: scene → camera → render → sensor → measure (one function each)
 //! - [`run`]: the runner (resume, shards, interruption)
 //! - [`results`]: CSV, manifest, merge
+//! - [`summary`](mod@summary): the cross-variant stage (`summary` nodes) after the whole plan
 //! - [`language`]: every node's properties (schemas), the reference tables
 //! - [`check`]: every variant's stages built from their parameters at check time
 //!
@@ -28,6 +29,7 @@ pub mod run;
 pub mod source;
 pub mod spec;
 pub mod stages;
+pub mod summary;
 pub mod sweep;
 pub mod units;
 

@@ -34,6 +34,9 @@ pub struct Plan {
     /// Swept parameter paths in file order (the results' parameter columns).
     pub axes: Vec<String>,
     pub variants: Vec<PlannedVariant>,
+    /// The experiment's `summary` nodes, run after every variant has results.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub summaries: Vec<super::summary::SummaryRecord>,
 }
 
 /// Run-wide replacements applied to every variant before hashing (`camsim run
@@ -88,6 +91,12 @@ pub fn plan_with(parsed: &Parsed, o: PlanOverrides) -> Result<Plan, Located> {
         camsim_version: crate::version().to_string(),
         axes: parsed.sweep.paths(),
         variants: out,
+        summaries: parsed
+            .spec
+            .summaries
+            .iter()
+            .map(super::summary::SummaryRecord::from_node)
+            .collect(),
     })
 }
 

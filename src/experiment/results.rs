@@ -129,6 +129,12 @@ pub struct Manifest {
     /// True when every variant of the plan has results.
     pub complete: bool,
     pub variants: Vec<VariantRecord>,
+    /// The experiment's `summary` nodes (`camsim merge` recomputes them).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub summaries: Vec<super::summary::SummaryRecord>,
+    /// Summaries that failed in the last assembly (reason each).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub summary_errors: Vec<String>,
 }
 
 impl Manifest {
@@ -161,6 +167,8 @@ impl Manifest {
                     spec: serde_json::to_value(&v.variant.spec).unwrap_or_default(),
                 })
                 .collect(),
+            summaries: plan.summaries.clone(),
+            summary_errors: vec![],
         }
     }
     pub fn write(&self, path: &Path) -> Result<()> {
@@ -339,8 +347,27 @@ pub fn merge(inputs: &[PathBuf], out: &Path) -> Result<usize> {
             }
         }
         let short: Vec<&str> = hashes.iter().map(|h| &h[..16.min(h.len())]).collect();
-        let (csv, missing) = dst.assemble(&merged.axes, &short)?;
+        let (mut csv, missing) = dst.assemble(&merged.axes, &short)?;
         merged.complete = missing == 0;
+        merged.summary_errors.clear();
+        if missing == 0 {
+            let (text, errors) = super::summary::append(
+                &dst.root,
+                &exp,
+                &merged.file,
+                &merged.axes,
+                &csv,
+                &merged.summaries,
+            )?;
+            csv = text;
+            for e in &errors {
+                eprintln!("camsim merge: experiment '{exp}': {e}");
+            }
+            if !errors.is_empty() {
+                incomplete += 1;
+            }
+            merged.summary_errors = errors;
+        }
         if missing > 0 {
             incomplete += 1;
             eprintln!(

@@ -313,8 +313,25 @@ pub fn run_plan(plan: &Plan, opts: &RunOptions, progress: &mut dyn Progress) -> 
     sum.not_run = plan.variants.len() - sum.done - sum.cached - sum.failed;
     manifest.wall_s = t0.elapsed().as_secs_f64();
     let all: Vec<&str> = plan.variants.iter().map(|v| v.short_hash()).collect();
-    let (csv, missing) = dir.assemble(&plan.axes, &all)?;
+    let (mut csv, missing) = dir.assemble(&plan.axes, &all)?;
     manifest.complete = missing == 0;
+    if missing == 0 {
+        // The cross-variant stage: every variant has results.
+        let (text, errors) = super::summary::append(
+            &dir.root,
+            &plan.experiment,
+            &plan.file,
+            &plan.axes,
+            &csv,
+            &plan.summaries,
+        )?;
+        csv = text;
+        for e in &errors {
+            eprintln!("camsim: experiment '{}': {e}", plan.experiment);
+        }
+        sum.failed += errors.len();
+        manifest.summary_errors = errors;
+    }
     // Variants of other shards that already have results (shared output directory).
     for (rec, v) in manifest.variants.iter_mut().zip(&plan.variants) {
         if rec.status == "not-run"

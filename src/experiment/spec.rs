@@ -215,6 +215,11 @@ pub struct ResolvedExperiment {
     pub save: Vec<String>,
     /// Values of label-only sweep axes (`tag.<name>`), for ids and results.
     pub tags: BTreeMap<String, Value>,
+    /// `summary "kind" of="…" …`: cross-variant summaries, run once the whole
+    /// plan has results. Not part of a variant's inputs (not serialised, so
+    /// not hashed): a summary is recomputed from the results on every run.
+    #[serde(skip)]
+    pub summaries: Vec<Measure>,
 }
 
 impl ResolvedExperiment {
@@ -239,6 +244,7 @@ impl ResolvedExperiment {
             sanity: None,
             save: Vec::new(),
             tags: BTreeMap::new(),
+            summaries: Vec::new(),
         }
     }
 

@@ -328,7 +328,12 @@ pub fn write_report(dir: &Path) -> Result<()> {
                 .map(|s| s.to_string_lossy().to_string())
                 .unwrap_or_default()
         });
-    let variants = variant_order(&rows);
+    // Rows of the cross-variant stage (`summary` nodes) get their own section.
+    let summary_v = crate::experiment::summary::VARIANT;
+    let variants: Vec<String> = variant_order(&rows)
+        .into_iter()
+        .filter(|v| v != summary_v)
+        .collect();
     let param_names: Vec<String> = rows
         .first()
         .map(|r| r.params.iter().map(|p| p.0.clone()).collect())
@@ -366,9 +371,14 @@ pub fn write_report(dir: &Path) -> Result<()> {
         }
     }
     let mut mouts = vec![];
+    let mut souts = vec![];
     let mut pid = 0;
     for m in &measurements {
         let mr: Vec<&ResultRow> = rows.iter().filter(|r| &r.measurement == m).collect();
+        if mr.iter().all(|r| r.variant == summary_v) {
+            souts.push(summary_out(dir, m, &mr, manifest.as_ref(), &mut pid)?);
+            continue;
+        }
         let mut quants: Vec<(String, String)> = vec![];
         for r in &mr {
             if !quants.iter().any(|q| q.0 == r.quantity) {
@@ -551,6 +561,7 @@ pub fn write_report(dir: &Path) -> Result<()> {
         param_names => param_names,
         variants => vrows,
         measurements => mouts,
+        summaries => souts,
         images => images(dir, &variants)?,
         version => crate::version(),
         css => CSS,
@@ -558,6 +569,98 @@ pub fn write_report(dir: &Path) -> Result<()> {
     };
     let html = render("report.html", REPORT, ctx)?;
     crate::diag::write_atomic(&dir.join("report.html"), html.as_bytes())
+}
+
+/// A summary's section: its figures (a row each) and its curves, one chart
+/// per curve-name prefix (`scatter-before/r`, `…/g`, `…/b` → one chart,
+/// series r, g, b); its `note=` from the manifest.
+#[derive(Serialize)]
+struct SummaryOut {
+    name: String,
+    kind: String,
+    note: String,
+    rows: Vec<MRow>,
+    plots: Vec<PlotOut>,
+}
+
+fn summary_out(
+    dir: &Path,
+    name: &str,
+    rows: &[&ResultRow],
+    manifest: Option<&serde_json::Value>,
+    pid: &mut usize,
+) -> Result<SummaryOut> {
+    let node = manifest
+        .and_then(|m| m.get("summaries"))
+        .and_then(|s| s.as_array())
+        .and_then(|a| {
+            a.iter()
+                .find(|x| x.get("name").and_then(|n| n.as_str()) == Some(name))
+        });
+    let field = |k: &str| {
+        node.and_then(|n| n.get(k))
+            .and_then(|v| v.as_str())
+            .unwrap_or("")
+            .to_string()
+    };
+    let note = node
+        .and_then(|n| n.get("params"))
+        .and_then(|p| p.get("note"))
+        .and_then(|v| v.as_str())
+        .unwrap_or("")
+        .to_string();
+    let table = rows
+        .iter()
+        .map(|r| MRow {
+            variant: if r.unit.is_empty() || r.unit == "1" {
+                r.quantity.clone()
+            } else {
+                format!("{} ({})", r.quantity, r.unit)
+            },
+            cells: vec![Cell {
+                value: fmt_num(r.value),
+                stderr: fmt_se(r.stderr),
+            }],
+        })
+        .collect();
+    let mut plots = vec![];
+    let p = dir
+        .join("curves")
+        .join(crate::experiment::summary::VARIANT)
+        .join(format!("{name}.csv"));
+    if p.exists() {
+        let mut by: Vec<(String, PlotSpec, Vec<Series>)> = vec![];
+        for c in read_curves(&p)? {
+            let (chart, series) = c.name.rsplit_once('/').unwrap_or((&c.name, &c.name));
+            let (chart, series) = (chart.to_string(), series.to_string());
+            let i = match by.iter().position(|b| b.0 == chart) {
+                Some(i) => i,
+                None => {
+                    let mut spec = curve_spec(name, &chart, &c);
+                    spec.scatter = chart.starts_with("scatter");
+                    spec.identity = spec.scatter;
+                    by.push((chart.clone(), spec, vec![]));
+                    by.len() - 1
+                }
+            };
+            by[i].2.push(Series {
+                name: series,
+                points: c.x.iter().copied().zip(c.y.iter().copied()).collect(),
+                stderr: c.stderr.clone(),
+            });
+        }
+        for (_, spec, series) in by {
+            *pid += 1;
+            plots.extend(plot_for(format!("plot{pid}"), spec, series));
+        }
+    }
+    Ok(SummaryOut {
+        name: name.to_string(),
+        kind: field("kind"),
+        note,
+        rows: table,
+        plots,
+    })
 }
 
 #[derive(Serialize)]
@@ -617,7 +720,12 @@ pub fn write_index(root: &Path) -> Result<()> {
             .or_else(|| {
                 (!rows.is_empty()).then(|| rows.iter().map(|r| r.total_s).fold(0.0, f64::max))
             });
-        let variants = variant_order(&rows);
+        // Rows of the cross-variant stage (`summary` nodes) get their own section.
+        let summary_v = crate::experiment::summary::VARIANT;
+        let variants: Vec<String> = variant_order(&rows)
+            .into_iter()
+            .filter(|v| v != summary_v)
+            .collect();
         let mut headline = vec![];
         let mut seen: Vec<(String, String)> = vec![];
         for r in rows.iter().filter(|r| Some(&r.variant) == variants.first()) {

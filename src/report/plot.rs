@@ -37,6 +37,17 @@ const COLORS: [RGBColor; 8] = [
     RGBColor(23, 190, 207),
 ];
 
+/// A series' colour: channel series named r, g, b in their own colours,
+/// others by position.
+fn series_color(i: usize, name: &str) -> RGBColor {
+    match name {
+        "r" => COLORS[1],
+        "g" => COLORS[2],
+        "b" => COLORS[0],
+        _ => COLORS[i % COLORS.len()],
+    }
+}
+
 fn range(v: impl Iterator<Item = f64>, log: bool) -> Option<(f64, f64)> {
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for x in v.filter(|x| x.is_finite() && (!log || *x > 0.0)) {
@@ -125,7 +136,7 @@ pub fn plot_svg(spec: &PlotSpec, series: &[Series]) -> Result<String> {
                         .map_err(|x| e(&x))?;
                 }
                 for (i, s) in series.iter().enumerate() {
-                    let c = COLORS[i % COLORS.len()];
+                    let c = series_color(i, &s.name);
                     let p: Vec<(f64, f64)> = s
                         .points
                         .iter()

@@ -22,3 +22,76 @@ pub fn numeric_rows(path: &str) -> Vec<Vec<f64>> {
     }
     rows
 }
+
+/// Open `page` in headless Chromium and return its DOM after the scripts ran,
+/// asserting that the page logged nothing to the console. Without Chromium:
+/// panics when the env var CI is set, else prints a note and returns None.
+pub fn chromium_dom(page: &std::path::Path) -> Option<String> {
+    use std::process::Command;
+    let chromium = ["/usr/bin/chromium", "/usr/bin/chromium-browser"]
+        .into_iter()
+        .map(std::path::PathBuf::from)
+        .find(|p| p.exists());
+    let Some(chromium) = chromium else {
+        if std::env::var_os("CI").is_some() {
+            panic!("chromium is required in CI (Debian package 'chromium')");
+        }
+        println!(
+            "note: chromium not found; skipping the browser check (install Debian's 'chromium')"
+        );
+        return None;
+    };
+    let ud = tempfile::tempdir().unwrap();
+    let mut child = Command::new(&chromium)
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-quic",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--enable-logging=stderr",
+            "--v=0",
+        ])
+        .arg(format!("--user-data-dir={}", ud.path().display()))
+        .arg("--dump-dom")
+        .arg(format!("file://{}", page.display()))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Read both pipes on threads, kill our child if it hangs past 90 s.
+    let mut so = child.stdout.take().unwrap();
+    let mut se = child.stderr.take().unwrap();
+    let t1 = std::thread::spawn(move || {
+        let mut s = String::new();
+        std::io::Read::read_to_string(&mut so, &mut s).ok();
+        s
+    });
+    let t2 = std::thread::spawn(move || {
+        let mut s = String::new();
+        std::io::Read::read_to_string(&mut se, &mut s).ok();
+        s
+    });
+    let start = std::time::Instant::now();
+    loop {
+        if child.try_wait().unwrap().is_some() {
+            break;
+        }
+        if start.elapsed().as_secs() > 90 {
+            child.kill().ok();
+            panic!("chromium did not finish within 90 s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    let (dom, log) = (t1.join().unwrap(), t2.join().unwrap());
+    let console: Vec<&str> = log.lines().filter(|l| l.contains(":CONSOLE")).collect();
+    assert!(
+        console.is_empty(),
+        "console messages in {}: {console:?}",
+        page.display()
+    );
+    Some(dom)
+}

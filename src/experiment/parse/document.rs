@@ -135,7 +135,7 @@ impl P {
                     )
                     .with_help_opt(help));
             }
-            if kind == DocKind::Setup && (nm == "sweep" || nm == "measure") {
+            if kind == DocKind::Setup && (nm == "sweep" || nm == "measure" || nm == "summary") {
                 return Err(self.e(
                     sp,
                     format!("'{nm}' belongs in an experiment, not in a setup"),
@@ -434,6 +434,19 @@ impl P {
                     self.no_children(file, n)?;
                     spec.save = self.parse_save(file, n)?;
                 }
+                "summary" => {
+                    self.no_children(file, n)?;
+                    let m = self.parse_summary(file, n)?;
+                    if let Some(prev) = spec.summaries.iter().find(|p| p.name == m.name) {
+                        return Err(self
+                            .e(m.span, format!("duplicate summary name '{}'", m.name))
+                            .with_help(format!(
+                                "first at {}; give one of them name=\"…\"",
+                                self.where_(prev.span)
+                            )));
+                    }
+                    spec.summaries.push(m);
+                }
                 "measured" => {
                     self.no_children(file, n)?;
                     let c = self.parse_measured(file, n, &dir)?;
@@ -449,6 +462,40 @@ impl P {
             }
         }
         let _ = camera_given;
+        for m in &spec.summaries {
+            if let Some(prev) = measure_spans.get(&m.name) {
+                return Err(self
+                    .e(
+                        m.span,
+                        format!("summary name '{}' is also a measurement's", m.name),
+                    )
+                    .with_help(format!(
+                        "the measurement is at {}; give the summary name=\"…\"",
+                        self.where_(*prev)
+                    )));
+            }
+            // (a missing of= is reported by check, after misspelt properties)
+            let Some(of) = m.of.first().map(String::as_str) else {
+                continue;
+            };
+            if !spec.measures.iter().any(|x| x.name == of) {
+                let at = m.spans.values.get("of").copied().unwrap_or(m.span);
+                let names: Vec<&str> = spec.measures.iter().map(|x| x.name.as_str()).collect();
+                return Err(self
+                    .e(
+                        at,
+                        format!(
+                            "summary '{}': of=\"{of}\" is not a measurement of this experiment",
+                            m.name
+                        ),
+                    )
+                    .with_help_opt(
+                        did_you_mean(of, names.iter().copied())
+                            .map(|x| format!("did you mean '{x}'?"))
+                            .or_else(|| Some(format!("measurements: {}", names.join(", ")))),
+                    ));
+            }
+        }
         crate::experiment::measured::check_references(&spec).map_err(|(sp, e)| self.ae(sp, e))?;
         if kind == DocKind::Experiment && spec.measures.is_empty() {
             return Err(self

@@ -51,6 +51,7 @@ const EXPERIMENT_NODES: &[&str] = &[
     "measured",
     "sanity",
     "save",
+    "summary",
 ];
 const SINGLETONS: &[&str] = &[
     "description",

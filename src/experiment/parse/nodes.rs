@@ -511,4 +511,84 @@ impl P {
             spans,
         })
     }
+
+    /// `summary "kind" [name="…"] of="<measurement>" name=value …`.
+    pub(super) fn parse_summary(&self, file: usize, n: &KdlNode) -> Result<Measure, Located> {
+        let kinds = crate::summary::KINDS;
+        let sp = self.node_span(file, n);
+        let mut kind: Option<String> = None;
+        let mut name = None;
+        let mut m = Measure {
+            name: String::new(),
+            kind: String::new(),
+            of: vec![],
+            params: Params::new(),
+            span: sp,
+            spans: Default::default(),
+        };
+        for e in self.entries(file, n)? {
+            match &e.name {
+                None => {
+                    let Value::String(s) = &e.value else {
+                        return Err(self.e(
+                            e.vspan,
+                            format!("expected a string, found {}", apply::describe(&e.value)),
+                        ));
+                    };
+                    if kind.is_some() {
+                        return Err(self
+                            .e(e.vspan, "'summary' takes one kind")
+                            .with_help("write summary \"steps\" of=\"mcc\" …"));
+                    }
+                    if !kinds.contains(&s.as_str()) {
+                        let help = did_you_mean(s, kinds.iter().copied())
+                            .map(|x| format!("did you mean '{x}'?"));
+                        return Err(self
+                            .e(
+                                e.vspan,
+                                format!(
+                                    "unknown summary '{s}'; expected one of: {}",
+                                    kinds.join(", ")
+                                ),
+                            )
+                            .with_help_opt(help));
+                    }
+                    kind = Some(s.clone());
+                    m.span = e.vspan;
+                }
+                Some((k, ks)) => match k.as_str() {
+                    "name" => {
+                        let s = apply::as_str(&e.value, "name").map_err(|x| self.ae(e.vspan, x))?;
+                        if s.is_empty() || s.contains('.') || s.contains(',') || s.contains('/') {
+                            return Err(self
+                                .e(e.vspan, format!("invalid summary name '{s}'"))
+                                .with_help("non-empty, without '.', ',' or '/'"));
+                        }
+                        name = Some(s.to_string());
+                    }
+                    "of" => {
+                        let s = apply::as_str(&e.value, "of").map_err(|x| self.ae(e.vspan, x))?;
+                        m.of = vec![s.to_string()];
+                        m.spans.values.insert("of".into(), e.vspan);
+                    }
+                    _ => {
+                        apply::check_generic(k, &e.value).map_err(|x| self.ae(*ks, x))?;
+                        m.params.set(k.clone(), e.value.clone());
+                        m.spans.insert(k, *ks, e.vspan);
+                    }
+                },
+            }
+        }
+        let Some(kind) = kind else {
+            return Err(self
+                .e(sp, "'summary' needs the summary kind")
+                .with_help(format!(
+                    "e.g. summary \"steps\" of=\"mcc\" axis=\"tag.step\" reference=\"measured\"; kinds: {}",
+                    kinds.join(", ")
+                )));
+        };
+        m.name = name.unwrap_or_else(|| kind.clone());
+        m.kind = kind;
+        Ok(m)
+    }
 }
