@@ -1,5 +1,8 @@
 //! Baselines of the shipped experiments (`experiments/*.kdl`): each runs end to
-//! end at a test quality (`camsim run --max-spp 64` for most, see [`max_spp`]; the files' own seeds) and
+//! end at a test quality (`camsim run --max-spp 64` for most, see [`max_spp`];
+//! the files' own seeds), its report opens in headless Chromium (no console
+//! message, every plot drawn, the pictures and curves its figure names:
+//! [`report_must_show`]), and
 //! its `results.csv` is compared with the committed baseline in
 //! `tests/baselines/<experiment>/results.csv` by `camsim diff`'s rule: a figure
 //! fails when it moved by more than the family-wise 3σ threshold of the
@@ -19,6 +22,8 @@
 //!
 //! `CAMSIM_BASELINES=fig05-relative-illumination,fig09-interreflection` limits
 //! a run (and a bless) to the experiments named.
+
+mod common;
 
 use camsim::report::diff::{DiffOptions, diff_rows};
 use camsim::report::results::read_results;
@@ -59,6 +64,48 @@ fn experiments() -> Vec<(String, PathBuf)> {
     }
     v.sort();
     v
+}
+
+/// What a figure's report must show (besides opening in headless Chromium with
+/// no console message and every plot drawn): text of its charts and pictures.
+fn report_must_show(experiment: &str) -> &'static [&'static str] {
+    match experiment {
+        // both views: white-balanced preview, raw mosaic picture, DNG link
+        "fig04-qualitative" => &[
+            "fig4_center",
+            "fig4_left",
+            "sensor-raw-mosaic",
+            "sensor.dng\" download>",
+        ],
+        // the rendered RI against Zemax's in one chart
+        "fig05-relative-illumination" => &["ri-vs-zemax: ri", "· reference", "· simulated"],
+        // LSF in µm, MTF in cy/mm with its noise floor, measured and Zemax overlays
+        "fig07-lsf-mtf" => &[
+            "sfr: edge-near/lsf",
+            "distance (µm)",
+            "frequency (cy/mm)",
+            "noise floor",
+            "mtf-vs-measured: edge-near/mtf",
+            "mtf-vs-zemax: edge-far/mtf",
+        ],
+        // R, G, B along the achromatic row and the G/R ratios
+        "fig09-interreflection" => &["profile: profile/r", "profile: ratio/g/r"],
+        _ => &[],
+    }
+}
+
+fn check_report(name: &str, dir: &Path) {
+    let page = dir.join("report.html");
+    let html = std::fs::read_to_string(&page).unwrap();
+    for needle in report_must_show(name) {
+        assert!(html.contains(needle), "{name}: the report lacks '{needle}'");
+    }
+    if let Some(dom) = common::chromium_dom(&page) {
+        assert!(
+            dom.contains("data-plots-ok=\"true\""),
+            "{name}: a plot of the report is empty or missing"
+        );
+    }
 }
 
 fn run(name: &str, file: &Path, out: &Path) {
@@ -105,6 +152,7 @@ fn shipped_experiments_match_their_baselines() {
     let mut failures = vec![];
     for (name, file) in &exps {
         run(name, file, tmp.path());
+        check_report(name, &tmp.path().join(name));
         let got = tmp.path().join(name).join("results.csv");
         let base = Path::new("tests/baselines").join(name).join("results.csv");
         if bless {
