@@ -85,8 +85,8 @@ fn report_must_show(experiment: &str) -> &'static [&'static str] {
             "distance (µm)",
             "frequency (cy/mm)",
             "noise floor",
-            "mtf-vs-measured: edge-near/mtf",
-            "mtf-vs-zemax: edge-far/mtf",
+            "near-vs-measured: edge-near/mtf",
+            "far-vs-zemax: edge-far/mtf",
         ],
         // R, G, B along the achromatic row and the G/R ratios
         "fig09-interreflection" => &["profile: profile/r", "profile: ratio/g/r"],

@@ -405,3 +405,56 @@ fn sfr_noise_floor_matches_scatter_and_noisy_edges_are_refused() {
     );
     assert!(e.contains(&format!("limit {MAX_NOISE_FLOOR}")), "{e}");
 }
+
+/// The plotted LSF spans the blur, not the plateaus: for a Gaussian edge of σ
+/// px with noise (contrast/noise 20, the fig07 regime) the span holds ±3σ
+/// around the edge (the LSF's non-negligible part, > 1 % of its peak) and is
+/// narrower than ±(2·rise + 4 px + rise) with the 10–90 % rise of a Gaussian,
+/// 2.563σ, plus a bin (¼ px) of noise on each crossing; in µm and cy/mm with
+/// a pixel pitch, and the MTF curve stops at Nyquist.
+#[test]
+fn plotted_lsf_spans_the_blur_and_the_mtf_stops_at_nyquist() {
+    for sigma in [0.5, 1.5] {
+        let mut rng = Rng(77);
+        let v: Vec<f64> = edge_image(sigma)
+            .iter()
+            .map(|x| x + 0.04 * rng.gauss())
+            .collect();
+        let r = sfr(
+            &Plane::new(W, H, v).unwrap(),
+            &SfrOptions {
+                pixel_pitch_m: Some(1.4e-6),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let (lo, hi) = r.lsf_span();
+        let peak = r.esf_x_px[(0..r.lsf.len())
+            .max_by(|&i, &j| r.lsf[i].abs().total_cmp(&r.lsf[j].abs()))
+            .unwrap()];
+        assert!(
+            lo <= peak - 3.0 * sigma && hi >= peak + 3.0 * sigma,
+            "σ {sigma}: ({lo}, {hi}) around {peak}"
+        );
+        // rise ≤ 2.563σ + 4 px (the 4 px smoothing) + ½ px of noise
+        let limit = 3.0 * (2.563 * sigma + 4.5) + 4.0;
+        assert!(
+            hi - lo <= 2.0 * limit,
+            "σ {sigma}: ({lo}, {hi}) wider than ±{limit}"
+        );
+        let c = r.curves();
+        let lsf = c.iter().find(|c| c.name == "lsf").unwrap();
+        assert_eq!(lsf.x_unit, "µm");
+        assert!(
+            lsf.x
+                .iter()
+                .all(|x| *x >= lo * 1.4 - 1e-9 && *x <= hi * 1.4 + 1e-9)
+        );
+        let mtf = c.iter().find(|c| c.name == "mtf").unwrap();
+        assert_eq!(mtf.x_unit, "cy/mm");
+        let nyquist = 0.5 / 1.4e-3;
+        assert!(mtf.x.iter().all(|f| *f <= nyquist + 1e-6));
+        assert!(mtf.x.last().unwrap() > &(0.95 * nyquist));
+        assert!(c.iter().any(|c| c.name == "mtf#noise floor"));
+    }
+}

@@ -308,10 +308,12 @@ impl Sfr {
         ]
     }
 
-    /// The span of the LSF that is not negligible, px: from the peak outward
-    /// to where the ESF has covered 0.5 % and 99.5 % of its step (normalised
-    /// by its plateaus), widened by half its width on each side and to at
-    /// least ±4 px, so the plot shows the blur, not ±150 px of noise.
+    /// The span of the LSF that is not negligible, px: around the edge's
+    /// 10–90 % rise (the ESF normalised by its plateaus and smoothed over
+    /// 4 px; from its first crossing of ½ outward until it passes 10 % and
+    /// 90 %; the smoothing widens the rise by at most 4 px), widened by twice
+    /// the rise distance plus 4 px on each side, so the plot shows the blur
+    /// and its tails, not ±150 px of plateau noise.
     pub fn lsf_span(&self) -> (f64, f64) {
         let n = self.esf.len();
         let x = &self.esf_x_px;
@@ -325,30 +327,33 @@ impl Sfr {
         let mean = |s: &[f64]| s.iter().sum::<f64>() / s.len() as f64;
         let (a, b) = (mean(&self.esf[..q]), mean(&self.esf[n - q..]));
         let step = b - a;
-        let peak = (0..n)
-            .max_by(|&i, &j| self.lsf[i].abs().total_cmp(&self.lsf[j].abs()))
-            .unwrap_or(n / 2);
-        let frac = |i: usize| {
-            if step == 0.0 {
-                0.5
-            } else {
-                (self.esf[i] - a) / step
-            }
-        };
-        let mut l = peak;
-        while l > 0 && frac(l) > 0.005 {
+        // The ESF normalised to its plateaus (0 → 1), smoothed over 17 bins
+        // (4 px) so plateau noise cannot pass for the edge.
+        let norm: Vec<f64> = self
+            .esf
+            .iter()
+            .map(|v| if step == 0.0 { 0.5 } else { (v - a) / step })
+            .collect();
+        let half = 8usize;
+        let frac: Vec<f64> = (0..n)
+            .map(|i| {
+                let (lo, hi) = (i.saturating_sub(half), (i + half + 1).min(n));
+                mean(&norm[lo..hi])
+            })
+            .collect();
+        // the edge: the first crossing of ½
+        let mid = (0..n).find(|&i| frac[i] >= 0.5).unwrap_or(n / 2);
+        let mut l = mid;
+        while l > 0 && frac[l] > 0.1 {
             l -= 1;
         }
-        let mut r = peak;
-        while r + 1 < n && frac(r) < 0.995 {
+        let mut r = mid;
+        while r + 1 < n && frac[r] < 0.9 {
             r += 1;
         }
-        let (xl, xr, xp) = (x[l], x[r], x[peak]);
-        let half = 0.5 * (xr - xl);
-        (
-            (xl - half).min(xp - 4.0).max(x[0]),
-            (xr + half).max(xp + 4.0).min(x[n - 1]),
-        )
+        let rise = x[r] - x[l];
+        let pad = 2.0 * rise + 4.0;
+        ((x[l] - pad).max(x[0]), (x[r] + pad).min(x[n - 1]))
     }
 
     /// Full width at half maximum of the LSF, px (linear interpolation).

@@ -463,9 +463,10 @@ pub fn write_report(dir: &Path) -> Result<()> {
                 };
                 if let Some(t) = &tag {
                     let suffix = format!(" · {t}");
-                    if let Some(s) =
-                        e.1.iter_mut()
-                            .find(|s| s.name.ends_with(&suffix) && s.points == points)
+                    if let Some(s) = e
+                        .1
+                        .iter_mut()
+                        .find(|s| (s.name == *t || s.name.ends_with(&suffix)) && s.points == points)
                     {
                         s.name = t.clone();
                         continue;

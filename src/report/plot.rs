@@ -112,8 +112,33 @@ pub fn plot_svg(spec: &PlotSpec, series: &[Series]) -> Result<String> {
     let mut out = String::new();
     let e = |e: &dyn std::fmt::Display| Error::invalid(format!("plot '{}': {e}", spec.title));
     {
-        let root = SVGBackend::with_string(&mut out, (640, 400)).into_drawing_area();
-        root.fill(&WHITE).map_err(|x| e(&x))?;
+        // The legend goes below the chart (one line per series), where long
+        // variant names cannot cover the data.
+        let legend = series.len() > 1 || !series.first().is_none_or(|s| s.name.is_empty());
+        let legend_h = if legend {
+            8 + 16 * series.len() as u32
+        } else {
+            0
+        };
+        let canvas = SVGBackend::with_string(&mut out, (640, 400 + legend_h)).into_drawing_area();
+        canvas.fill(&WHITE).map_err(|x| e(&x))?;
+        let (root, below) = canvas.split_vertically(400);
+        if legend {
+            for (i, s) in series.iter().enumerate() {
+                let c = series_color(i, &s.name);
+                let y = 8 + 16 * i as i32;
+                below
+                    .draw(&PathElement::new(vec![(70, y), (92, y)], c.stroke_width(2)))
+                    .map_err(|x| e(&x))?;
+                below
+                    .draw(&Text::new(
+                        s.name.clone(),
+                        (98, y - 6),
+                        ("sans-serif", 12).into_font().color(&BLACK),
+                    ))
+                    .map_err(|x| e(&x))?;
+            }
+        }
         macro_rules! draw {
             ($xr:expr, $yr:expr) => {{
                 let mut chart = ChartBuilder::on(&root)
@@ -166,27 +191,15 @@ pub fn plot_svg(spec: &PlotSpec, series: &[Series]) -> Result<String> {
                                 .map_err(|x| e(&x))?;
                         }
                     }
-                    let ann = if spec.scatter {
+                    if spec.scatter {
                         chart
                             .draw_series(p.iter().map(|&q| Circle::new(q, 3, c.filled())))
-                            .map_err(|x| e(&x))?
+                            .map_err(|x| e(&x))?;
                     } else {
                         chart
                             .draw_series(LineSeries::new(p.clone(), c.stroke_width(2)))
-                            .map_err(|x| e(&x))?
-                    };
-                    ann.label(&s.name).legend(move |(x, y)| {
-                        PathElement::new(vec![(x, y), (x + 18, y)], c.stroke_width(2))
-                    });
-                }
-                if series.len() > 1 || !series.first().is_none_or(|s| s.name.is_empty()) {
-                    chart
-                        .configure_series_labels()
-                        .position(SeriesLabelPosition::UpperRight)
-                        .background_style(WHITE.mix(0.85))
-                        .border_style(RGBColor(180, 180, 180))
-                        .draw()
-                        .map_err(|x| e(&x))?;
+                            .map_err(|x| e(&x))?;
+                    }
                 }
             }};
         }
