@@ -22,8 +22,11 @@ pub const EXPERIMENTS: &[(&str, &str)] = &[
     embed!("cornell-box.kdl"),
     embed!("e2e-quick.kdl"),
     embed!("fig07-lsf-mtf.kdl"),
+    embed!("fig08-sensor-noise.kdl"),
+    embed!("fig11-conversion-gain.kdl"),
     embed!("rtf-vs-prescription.kdl"),
     embed!("smoke.kdl"),
+    embed!("table1-sensor.kdl"),
 ];
 
 /// The directory the embedded experiments pretend to live in.

@@ -111,13 +111,14 @@ pub struct VariantOutput {
 /// Run the figures of one variant.
 pub fn run_variant(v: &PlannedVariant) -> Result<VariantOutput> {
     let spec = &v.variant.spec;
+    // A measurement that needs only the sensor's configuration renders nothing.
     let need = spec.measures.iter().fold(stages::Needs::default(), |a, m| {
-        let n = super::measured::needs_of(m);
-        stages::Needs {
-            optical_image: a.optical_image || n.optical_image || n.sensor_image,
-            sensor_image: a.sensor_image || n.sensor_image,
-        }
+        a.union(super::measured::needs_of(m))
     });
+    let need = stages::Needs {
+        optical_image: need.optical_image || need.sensor_image,
+        ..need
+    };
     let mut out = VariantOutput::default();
     let mut oi = None;
     let mut si = None;

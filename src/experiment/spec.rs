@@ -173,17 +173,8 @@ pub struct MeasuredInput {
     pub span: Span,
 }
 
-/// Known measurement kinds.
-pub const MEASURE_KINDS: &[&str] = &[
-    "colorimetry",
-    "sfr",
-    "ri",
-    "noise",
-    "profile",
-    "mcc",
-    "compare",
-    "convergence",
-];
+/// Known measurement kinds (the one list, [`crate::measure::request::KINDS`]).
+pub const MEASURE_KINDS: &[&str] = crate::measure::request::KINDS;
 
 /// An experiment with its base setups merged in, before sweeps are applied.
 #[derive(Clone, Debug, PartialEq, Serialize)]

@@ -12,14 +12,17 @@
 pub mod colorimetry;
 pub mod compare;
 pub mod convergence;
+pub mod conversion_gain;
 pub mod inputs;
 pub mod io;
 pub mod mcc;
 pub mod noise;
+pub mod noise_model;
 pub mod plane;
 pub mod profile;
 pub mod request;
 pub mod ri;
+pub mod sensor_calibration;
 pub mod sfr;
 pub mod shared_params;
 pub mod stats;

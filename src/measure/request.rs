@@ -11,11 +11,13 @@ use super::Measured;
 use super::colorimetry::ColorimetryOptions;
 use super::compare::CompareOptions;
 use super::convergence::ConvergenceOptions;
+use super::conversion_gain::ConversionGainOptions;
 use super::mcc::MccRequest;
 use super::noise::NoiseRequest;
 use super::plane::Plane;
 use super::profile::ProfileRequest;
 use super::ri::RiRequest;
+use super::sensor_calibration::CalibrationOptions;
 use super::sfr::SfrRequest;
 use crate::params::{ParamDict, ParamError, Params, Schema, Value};
 use crate::{Error, Result};
@@ -33,6 +35,8 @@ pub const KINDS: &[&str] = &[
     "mcc",
     "compare",
     "convergence",
+    "conversion-gain",
+    "sensor-calibration",
 ];
 
 /// The schema of `measure "<kind>"`.
@@ -46,6 +50,8 @@ pub fn schema(kind: &str) -> Option<&'static Schema> {
         "mcc" => &super::mcc::SCHEMA,
         "compare" => &super::compare::SCHEMA,
         "convergence" => &super::convergence::SCHEMA,
+        "conversion-gain" => &super::conversion_gain::SCHEMA,
+        "sensor-calibration" => &super::sensor_calibration::SCHEMA,
         _ => return None,
     })
 }
@@ -66,6 +72,8 @@ pub enum MeasureOptions {
     Mcc(MccRequest),
     Compare(CompareOptions),
     Convergence(ConvergenceOptions),
+    ConversionGain(ConversionGainOptions),
+    SensorCalibration(CalibrationOptions),
 }
 
 /// Read the properties of `measure "<kind>"` (without `name`/`of`, which the
@@ -92,6 +100,12 @@ pub fn options(kind: &str, params: &Params, base_dir: &Path) -> Result<MeasureOp
         "mcc" => MeasureOptions::Mcc(super::mcc::from_params(&d)?),
         "compare" => MeasureOptions::Compare(super::compare::from_params(&d)?),
         "convergence" => MeasureOptions::Convergence(super::convergence::from_params(&d)?),
+        "conversion-gain" => {
+            MeasureOptions::ConversionGain(super::conversion_gain::from_params(&d)?)
+        }
+        "sensor-calibration" => {
+            MeasureOptions::SensorCalibration(super::sensor_calibration::from_params(&d)?)
+        }
         _ => unreachable!("schema() knows the kind"),
     };
     d.finish()?;
@@ -118,6 +132,8 @@ impl MeasureOptions {
             MeasureOptions::Mcc(_) => "mcc",
             MeasureOptions::Compare(_) => "compare",
             MeasureOptions::Convergence(_) => "convergence",
+            MeasureOptions::ConversionGain(_) => "conversion-gain",
+            MeasureOptions::SensorCalibration(_) => "sensor-calibration",
         }
     }
 
@@ -159,21 +175,41 @@ pub struct Needs {
     pub optical_image: bool,
     /// The sensor image (implies the optical image).
     pub sensor_image: bool,
+    /// The variant's sensor configuration only (no scene, no render): the
+    /// measurement synthesises its own frames through the sensor pipeline.
+    pub sensor_config: bool,
+}
+
+impl Needs {
+    /// What either of two measurements needs.
+    pub fn union(self, o: Needs) -> Needs {
+        Needs {
+            optical_image: self.optical_image || o.optical_image,
+            sensor_image: self.sensor_image || o.sensor_image,
+            sensor_config: self.sensor_config || o.sensor_config,
+        }
+    }
 }
 
 /// Stage requirements per measurement kind. `colorimetry` reads a spectrum
-/// only; `ri` and `convergence` can work on the optical image; every other
-/// kind measures sensor digital values.
+/// only; `conversion-gain` and `sensor-calibration` the sensor's
+/// configuration only; `ri` and `convergence` can work on the optical image;
+/// every other kind measures sensor digital values.
 pub fn needs(kind: &str) -> Needs {
     match kind {
         "colorimetry" => Needs::default(),
+        "conversion-gain" | "sensor-calibration" => Needs {
+            sensor_config: true,
+            ..Needs::default()
+        },
         "ri" | "convergence" => Needs {
             optical_image: true,
-            sensor_image: false,
+            ..Needs::default()
         },
         _ => Needs {
             optical_image: true,
             sensor_image: true,
+            sensor_config: true,
         },
     }
 }
@@ -187,6 +223,13 @@ pub fn run(name: &str, of: &[String], opts: &MeasureOptions, inp: &Inputs) -> Re
     let need_si = || {
         inp.si
             .ok_or_else(|| Error::invalid(format!("measurement '{name}' needs a sensor image")))
+    };
+    let need_sensor = || {
+        inp.sensor.ok_or_else(|| {
+            Error::invalid(format!(
+                "measurement '{name}' needs a sensor (add sensor \"sensors/….kdl\")"
+            ))
+        })
     };
     let no_of = || -> Result<()> {
         if of.is_empty() {
@@ -220,8 +263,12 @@ pub fn run(name: &str, of: &[String], opts: &MeasureOptions, inp: &Inputs) -> Re
             no_of()?;
             let si = need_si()?;
             let mut plane = Plane::from_sensor(si)?;
-            if let Some(roi) = r.roi_px {
-                plane = plane.crop(to_window(roi, si.window, "roi-px")?)?;
+            let crop = r
+                .roi_px
+                .map(|roi| to_window(roi, si.window, "roi-px"))
+                .transpose()?;
+            if let Some(c) = crop {
+                plane = plane.crop(c)?;
             }
             let opts = super::noise::NoiseOptions {
                 conversion_gain_dv_per_e: r
@@ -230,7 +277,33 @@ pub fn run(name: &str, of: &[String], opts: &MeasureOptions, inp: &Inputs) -> Re
                 seed: r.seed.unwrap_or(inp.seed),
                 ..r.options.clone()
             };
-            Ok(super::noise::measure(&plane, &opts, name)?.0)
+            // On a rendered image: the render's Monte Carlo variance per
+            // pixel (in the outlier test's σ) and the noise model's prediction.
+            let mc = match (inp.sensor, inp.oi) {
+                (Some(cfg), Some(oi)) => {
+                    let mut mc = super::noise_model::mc_variance_plane(cfg, si, oi, name)?;
+                    if let Some(c) = crop {
+                        mc = mc.crop(c)?;
+                    }
+                    Some((cfg, mc))
+                }
+                _ => None,
+            };
+            let (mut out, regions) =
+                super::noise::measure_with(&plane, &opts, mc.as_ref().map(|m| &m.1), name)?;
+            if let Some((cfg, mc)) = &mc {
+                super::noise_model::add_model(
+                    &mut out,
+                    &regions,
+                    &plane,
+                    mc,
+                    cfg,
+                    &opts.channel,
+                    r.band,
+                    name,
+                )?;
+            }
+            Ok(out)
         }
         MeasureOptions::Ri(r) => {
             no_of()?;
@@ -262,6 +335,14 @@ pub fn run(name: &str, of: &[String], opts: &MeasureOptions, inp: &Inputs) -> Re
                 ..Default::default()
             };
             super::ri::relative_illumination(&plane, &opts, name)
+        }
+        MeasureOptions::ConversionGain(o) => {
+            no_of()?;
+            super::conversion_gain::measure(need_sensor()?, o, inp.seed, name)
+        }
+        MeasureOptions::SensorCalibration(o) => {
+            no_of()?;
+            super::sensor_calibration::measure(need_sensor()?, o, inp.seed, name)
         }
         MeasureOptions::Compare(_) | MeasureOptions::Convergence(_) => {
             Err(Error::invalid(format!(

@@ -5,12 +5,16 @@
 //!
 //! Plots: every curve name of a measurement becomes one chart with one
 //! series per variant (curves named `*_vs_time` on log–log axes; `scatter`
-//! with the identity line; `std_vs_mean` as points). When the variants sweep a
+//! with the identity line; `std_vs_mean` as points). Curves named
+//! `<chart>#<series>` share the chart `<chart>`, one series each (per variant
+//! when there are several), styled by the series name: `counts` as histogram
+//! bars, `points…`/`regions…`/`levels…` as points, anything else as a line
+//! (a model curve, a band edge, a fit). When the variants sweep a
 //! numeric parameter, each figure of a measurement with at most 10 figures is
 //! also plotted against it, with ±1 se. Tables have a row per variant, or a
 //! row per quantity when a measurement has more than 10 (e.g. MCC means).
 
-use super::plot::{PlotSpec, Series, drawable_points, plot_svg};
+use super::plot::{PlotSpec, Series, Style, drawable_points, plot_svg};
 use super::results::{ResultRow, read_curves, read_results};
 use crate::{Error, Result};
 use serde::Serialize;
@@ -261,6 +265,20 @@ fn html_escape(s: &str) -> String {
         .replace('"', "&quot;")
 }
 
+/// The style of series `<chart>#<name>` (see the module docs).
+fn series_style(name: &str) -> Style {
+    if name == "counts" {
+        Style::Bars
+    } else if ["points", "regions", "levels"]
+        .iter()
+        .any(|p| name.starts_with(p))
+    {
+        Style::Points
+    } else {
+        Style::Line
+    }
+}
+
 fn curve_spec(measurement: &str, name: &str, c: &crate::measure::Curve) -> PlotSpec {
     let lbl = |n: &str, u: &str| {
         if u.is_empty() || u == "1" {
@@ -277,6 +295,7 @@ fn curve_spec(measurement: &str, name: &str, c: &crate::measure::Curve) -> PlotS
         log_y: name.ends_with("_vs_time"),
         scatter: name == "scatter" || name == "std_vs_mean",
         identity: name == "scatter",
+        legend_left: false,
     }
 }
 
@@ -398,14 +417,32 @@ pub fn write_report(dir: &Path) -> Result<()> {
                 continue;
             }
             for c in read_curves(&p)? {
-                let e = by_name.entry(c.name.clone()).or_insert_with(|| {
-                    order.push(c.name.clone());
-                    (curve_spec(m, &c.name, &c), vec![])
+                let (chart, part) = match c.name.split_once('#') {
+                    Some((a, b)) => (a.to_string(), Some(b.to_string())),
+                    None => (c.name.clone(), None),
+                };
+                let e = by_name.entry(chart.clone()).or_insert_with(|| {
+                    order.push(chart.clone());
+                    let mut spec = curve_spec(m, &chart, &c);
+                    spec.legend_left = part.is_some();
+                    (spec, vec![])
                 });
+                let (name, style) = match &part {
+                    None => (v.clone(), None),
+                    Some(sn) => (
+                        if variants.len() > 1 {
+                            format!("{v} {sn}")
+                        } else {
+                            sn.clone()
+                        },
+                        Some(series_style(sn)),
+                    ),
+                };
                 e.1.push(Series {
-                    name: v.clone(),
+                    name,
                     points: c.x.iter().copied().zip(c.y.iter().copied()).collect(),
                     stderr: c.stderr.clone(),
+                    style,
                 });
             }
         }
@@ -447,6 +484,7 @@ pub fn write_report(dir: &Path) -> Result<()> {
                     name: q.clone(),
                     points: pts.iter().map(|p| (p.0, p.1)).collect(),
                     stderr: pts.iter().map(|p| p.2).collect(),
+                    style: None,
                 };
                 pid += 1;
                 plots.extend(plot_for(format!("plot{pid}"), spec, vec![s]));
