@@ -12,9 +12,9 @@
 //! variances (for a variance s², Var(s²) ≈ (m₄ − s⁴)/n); K is a weighted
 //! least-squares slope through the origin (weights from each point's variance SE),
 //! inflated by √(χ²/(n−1)) when the points scatter more than their SEs; quantities in
-//! electrons add K's relative error in quadrature. Saturation is the middle of the
-//! plateau of levels whose variance is within 2 SE of the maximum (plus half the
-//! level spacing each side), its SE that plateau's half-width / √3 (uniform).
+//! electrons add K's relative error in quadrature. Saturation (the variance
+//! maximum) adds the level spacing around it and the width of the plateau of
+//! levels whose variance is within 2 SE of the maximum (each uniform, half-width / √3).
 
 use crate::figure::Figure;
 
@@ -393,31 +393,24 @@ pub fn photon_transfer(seqs: &[FlatSequence]) -> Result<PhotonTransfer, String> 
         stderr: prnu_se,
     };
     let saturation_e = if saturated {
-        // Near its maximum the variance curve is flat: every level whose
-        // variance is within 2 SE of the largest could be the maximum. The
-        // estimate is the middle of that plateau (widened by half the level
-        // spacing each side), its SE the plateau's half-width / √3.
+        // EMVA's saturation is the level of largest variance. Near its
+        // maximum the variance curve is flat, so its SE has two parts: the
+        // level spacing around it (uniform, half-width / √3) and the plateau
+        // of levels whose variance is within 2 SE of the largest, any of which
+        // could be the maximum (its half-width / √3).
+        let x = pt(lights[imax]).0;
+        let lo = if imax > 0 { pt(lights[imax - 1]).0 } else { x };
+        let hi = pt(lights[imax + 1]).0;
         let (ymax, semax) = (pt(lights[imax]).1, pt(lights[imax]).2);
-        let near: Vec<usize> = (0..lights.len())
-            .filter(|&j| {
-                let (_, y, se) = pt(lights[j]);
-                ymax - y <= 2.0 * (se * se + semax * semax).sqrt()
-            })
+        let near: Vec<f64> = lights
+            .iter()
+            .map(|&i| pt(i))
+            .filter(|&(_, y, se)| ymax - y <= 2.0 * (se * se + semax * semax).sqrt())
+            .map(|p| p.0)
             .collect();
-        let (j0, j1) = (near[0].min(imax), near[near.len() - 1].max(imax));
-        let x_at = |j: usize| pt(lights[j]).0;
-        let lo = if j0 > 0 {
-            (x_at(j0) + x_at(j0 - 1)) / 2.0
-        } else {
-            x_at(j0)
-        };
-        let hi = if j1 + 1 < lights.len() {
-            (x_at(j1) + x_at(j1 + 1)) / 2.0
-        } else {
-            x_at(j1)
-        };
-        let spacing = (hi - lo) / 2.0 / 3f64.sqrt();
-        let v = (lo + hi) / 2.0 / k;
+        let (p0, p1) = near.iter().fold((x, x), |(a, b), &v| (a.min(v), b.max(v)));
+        let spacing = ((hi - lo) / 2.0 / 3f64.sqrt()).hypot((p1 - p0) / 2.0 / 3f64.sqrt());
+        let v = x / k;
         Some(Estimate {
             value: v,
             stderr: ((spacing / k).powi(2) + (v * rk).powi(2)).sqrt(),
