@@ -98,6 +98,12 @@ fn fig11_experiment_recovers_the_conversion_gain() {
     assert!((a - 0.1707).abs() < 3.0 * se, "alpha {a} ± {se}");
     assert!(se > 0.0 && se < 0.01, "stderr {se}");
     assert_eq!(m["conversion-gain/values"].0, 1500.0);
+    // Eq. 12 on the caption's numbers, in the results: 0.1707, not 0.1677
+    let r = m["conversion-gain/reference_conversion_gain"].0;
+    assert!(
+        (r - 0.1707).abs() < 0.0001 && (r - 0.1677).abs() > 0.0029,
+        "{r}"
+    );
     assert!((m["conversion-gain/mean"].0 - 320.0).abs() < 3.0);
     assert_eq!(render_s, 0.0, "a sensor-only measurement renders nothing");
     // no optical image was made: no preview of one

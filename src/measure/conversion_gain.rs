@@ -9,6 +9,10 @@
 //! ([`crate::sensor::calibrate::conversion_gain_appendix3`], delta-method
 //! standard error) with the sensor's PRNU (or `prnu-percent`).
 //!
+//! With `reference-mean-dv` and `reference-variance-dv2` (a published
+//! capture's moments, e.g. Fig. 11's caption: 320.7 DV, 57.8 DV²) Eq. 12 is
+//! also applied to them: `reference_conversion_gain` (exact arithmetic).
+//!
 //! Curves (the two histograms of the paper's Fig. 11), drawn on one chart
 //! each (`<chart>#<series>` names, see the report):
 //! - `dv_histogram#counts`: pooled DV above black, one bin per DV, and
@@ -38,6 +42,8 @@ pub struct ConversionGainOptions {
     pub channel: String,
     /// PRNU of Eq. 12 as a fraction; None = the sensor's.
     pub prnu: Option<f64>,
+    /// A published (mean DV, variance DV²) to put through Eq. 12 as well.
+    pub reference: Option<(f64, f64)>,
 }
 
 impl Default for ConversionGainOptions {
@@ -49,6 +55,7 @@ impl Default for ConversionGainOptions {
             roi_px: None,
             channel: "g".into(),
             prnu: None,
+            reference: None,
         }
     }
 }
@@ -100,6 +107,20 @@ pub static SCHEMA: Schema = Schema {
             "PRNU (% rms) Eq. 12 corrects for (0 ≤ x < 100)",
             "0.61",
         ),
+        ParamSpec::new(
+            "reference-mean-dv",
+            Kind::Number,
+            "none",
+            "a published capture's mean above black, put through Eq. 12 with reference-variance-dv2 and the PRNU used: reference_conversion_gain (needs reference-variance-dv2)",
+            "320.7",
+        ),
+        ParamSpec::new(
+            "reference-variance-dv2",
+            Kind::Number,
+            "none",
+            "that capture's variance, DV² (needs reference-mean-dv)",
+            "57.8",
+        ),
     ],
 };
 
@@ -128,6 +149,13 @@ pub fn from_params(d: &ParamDict) -> std::result::Result<ConversionGainOptions, 
         }
         o.prnu = Some(x / 100.0);
     }
+    let m = d.positive("reference-mean-dv")?;
+    let v = d.positive("reference-variance-dv2")?;
+    // Each may be probed alone; measure() insists on both.
+    o.reference = match (m, v) {
+        (None, None) => None,
+        (m, v) => Some((m.unwrap_or(f64::NAN), v.unwrap_or(f64::NAN))),
+    };
     Ok(o)
 }
 
@@ -218,6 +246,13 @@ pub fn measure(
         )));
     }
     let prnu = o.prnu.unwrap_or(cfg.prnu);
+    if let Some((rm, rv)) = o.reference
+        && (rm.is_nan() || rv.is_nan())
+    {
+        return Err(Error::invalid(format!(
+            "{what}: reference-mean-dv and reference-variance-dv2 go together"
+        )));
+    }
     let a = conversion_gain_appendix3(&vals, prnu)
         .map_err(|e| Error::invalid(format!("{what}: {e}")))?;
     if a.value <= 0.0 || a.value.is_nan() {
@@ -258,6 +293,16 @@ pub fn measure(
         f("prnu_used", "%", prnu * 100.0, 0.0),
         f("values", "1", n, 0.0),
     ];
+    let mut figures = figures;
+    if let Some((rm, rv)) = o.reference {
+        // Eq. 12 on the published moments: exact arithmetic, no sampling.
+        figures.push(f(
+            "reference_conversion_gain",
+            "DV/e-",
+            crate::sensor::calibrate::alpha_eq12(rm, rv, prnu),
+            0.0,
+        ));
+    }
     // Fig. 11 (a): one bin per DV, and a Poisson count of the same mean.
     let lo = vals.iter().cloned().fold(f64::INFINITY, f64::min).floor() as i64;
     let hi = vals

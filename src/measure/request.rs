@@ -163,6 +163,16 @@ impl MeasureOptions {
                 Err(ParamError::section("convergence needs spp=(…)")
                     .with_help("e.g. spp=(16 64 256): at least two increasing sample counts"))
             }
+            MeasureOptions::ConversionGain(c)
+                if c.reference.is_some_and(|(m, v)| m.is_nan() || v.is_nan()) =>
+            {
+                Err(ParamError::section(
+                    "conversion-gain: reference-mean-dv and reference-variance-dv2 go together",
+                )
+                .with_help(
+                    "e.g. reference-mean-dv=320.7 reference-variance-dv2=57.8 (Fig. 11's caption)",
+                ))
+            }
             _ => Ok(()),
         }
     }

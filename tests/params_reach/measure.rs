@@ -101,6 +101,16 @@ pub fn probe(kind: &str, name: &str, opts: &MeasureOptions) -> Option<Value> {
             "roi-px" => rect(c.roi_px),
             "channel" => text(&c.channel),
             "prnu-percent" => c.prnu.and_then(|p| num(p * 100.0)),
+            "reference-mean-dv" => c
+                .reference
+                .map(|r| r.0)
+                .filter(|x| !x.is_nan())
+                .and_then(num),
+            "reference-variance-dv2" => c
+                .reference
+                .map(|r| r.1)
+                .filter(|x| !x.is_nan())
+                .and_then(num),
             _ => None,
         },
         ("sensor-calibration", MeasureOptions::SensorCalibration(c)) => match name {
