@@ -50,6 +50,11 @@ pub struct OpticalImage {
     /// Standard error of each irradiance value (same layout), from independent
     /// sample batches; empty when not computed.
     pub stderr: Vec<f32>,
+    /// Standard error of each weighted band sum the render was asked for
+    /// (`RenderSettings::stderr_weights`), per pixel: index y·w·k + x·k + set
+    /// for k sets; from the same batches. Empty when not computed.
+    #[serde(default)]
+    pub weighted_stderr: Vec<f32>,
     /// Object label per pixel (index into `label_names`, or `scene::NO_OBJECT`).
     pub labels: Vec<u32>,
     /// Object names indexed by label.
@@ -80,6 +85,7 @@ impl OpticalImage {
             pixel_pitch_m,
             irradiance: vec![0.0; n * nb],
             stderr: vec![],
+            weighted_stderr: vec![],
             labels: vec![crate::scene::NO_OBJECT; n],
             label_names: vec![],
             depth_m: vec![f32::INFINITY; n],

@@ -295,6 +295,13 @@ fn setup(schema: &Schema, p: &ParamSpec, c: &mut Case) -> &'static str {
                     }
                 }
             }
+            // these two go together
+            "conversion-gain" if p.name == "reference-mean-dv" => {
+                c.set("measure", "reference-variance-dv2", "57.8")
+            }
+            "conversion-gain" if p.name == "reference-variance-dv2" => {
+                c.set("measure", "reference-mean-dv", "320.7")
+            }
             _ => {}
         }
         if p.name == "input" || (kind == "ri" && p.name == "channel") {

@@ -44,6 +44,7 @@ fn settings(spp: u32, max_bounces: u32) -> RenderSettings {
         batches: 8,
         threads: 0,
         roi: None,
+        stderr_weights: vec![],
     }
 }
 

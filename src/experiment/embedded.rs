@@ -25,10 +25,13 @@ pub const EXPERIMENTS: &[(&str, &str)] = &[
     embed!("fig04-qualitative.kdl"),
     embed!("fig05-relative-illumination.kdl"),
     embed!("fig07-lsf-mtf.kdl"),
+    embed!("fig08-sensor-noise.kdl"),
     embed!("fig09-interreflection.kdl"),
     embed!("fig10-chromatic.kdl"),
+    embed!("fig11-conversion-gain.kdl"),
     embed!("rtf-vs-prescription.kdl"),
     embed!("smoke.kdl"),
+    embed!("table1-sensor.kdl"),
 ];
 
 /// The directory the embedded experiments pretend to live in.

@@ -103,6 +103,17 @@ pub fn check_references(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyErr
         }
         let opts =
             request::checked(&m.kind, &m.params, base_dir(spec)).map_err(|e| locate(m, e))?;
+        let n = request::needs(&m.kind);
+        if n.sensor_config && !n.optical_image && spec.sensor.is_none() {
+            return Err((
+                m.span,
+                ApplyError::new(format!(
+                    "measure \"{}\" synthesises frames through the experiment's sensor, and there is none",
+                    m.kind
+                ))
+                .help("add sensor \"sensors/imx363.kdl\" (or another sensor file)"),
+            ));
+        }
         let takes_of = request::schema(&m.kind).is_some_and(|s| s.get("of").is_some());
         if !m.of.is_empty() && !takes_of {
             return Err((
@@ -266,6 +277,7 @@ pub fn needs_of(m: &Measure) -> stages::Needs {
         return stages::Needs {
             optical_image: true,
             sensor_image: true,
+            sensor_config: true,
         };
     }
     stages::needs(&m.kind)

@@ -111,18 +111,22 @@ pub struct VariantOutput {
 /// Run the figures of one variant.
 pub fn run_variant(v: &PlannedVariant) -> Result<VariantOutput> {
     let spec = &v.variant.spec;
+    // `save "dng"` needs the sensor image; a measurement that needs only the
+    // sensor's configuration renders nothing.
     let save_dng = spec.save.iter().any(|s| s == "dng");
     let init = stages::Needs {
         optical_image: save_dng,
         sensor_image: save_dng,
+        ..stages::Needs::default()
     };
-    let need = spec.measures.iter().fold(init, |a, m| {
-        let n = super::measured::needs_of(m);
-        stages::Needs {
-            optical_image: a.optical_image || n.optical_image || n.sensor_image,
-            sensor_image: a.sensor_image || n.sensor_image,
-        }
-    });
+    let need = spec
+        .measures
+        .iter()
+        .fold(init, |a, m| a.union(super::measured::needs_of(m)));
+    let need = stages::Needs {
+        optical_image: need.optical_image || need.sensor_image,
+        ..need
+    };
     let mut out = VariantOutput::default();
     let mut oi = None;
     let mut si = None;

@@ -21,25 +21,7 @@ use glam::DVec3;
 use std::collections::BTreeMap;
 use std::path::Path;
 
-/// Which stages a measurement needs.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Needs {
-    /// Scene, camera and render (the optical image).
-    pub optical_image: bool,
-    /// The sensor image (implies the optical image).
-    pub sensor_image: bool,
-}
-
-/// Stage requirements per measurement kind. `colorimetry` reads a spectrum
-/// only; `ri` and `convergence` can work on the optical image; every other
-/// kind measures sensor digital values.
-pub fn needs(kind: &str) -> Needs {
-    let n = crate::measure::request::needs(kind);
-    Needs {
-        optical_image: n.optical_image,
-        sensor_image: n.sensor_image,
-    }
-}
+pub use crate::measure::request::{Needs, needs};
 
 /// Load the scene file (pbrt or KDL) and apply removals, overrides and
 /// additions, then the camera pose. pbrt scenes get the paper's spectra when
@@ -288,8 +270,18 @@ pub fn render(spec: &ResolvedExperiment, scene: &Scene, camera: &dyn Camera) -> 
         }
         _ => (None, BTreeMap::new()),
     };
+    // With a sensor, each pixel also gets the standard error of every CFA
+    // channel's electron rate (the noise model adds it to the sensor's noise).
+    let stderr_weights = match sensor_config(spec)? {
+        Some(cfg) => crate::sensor::pipeline::channel_weights(&cfg, &spec.render.wavelength)
+            .iter()
+            .map(|w| w.iter().map(|&x| x as f32).collect())
+            .collect(),
+        None => vec![],
+    };
     let settings = RenderSettings {
         roi,
+        stderr_weights,
         ..render_settings(spec)?
     };
     let oi = crate::render::render(scene, camera, &film, &settings)?;
@@ -316,9 +308,15 @@ pub fn measure(
     let dir = spec.file.parent().unwrap_or(Path::new("."));
     let opts = crate::measure::request::checked(&m.kind, &m.params, dir)
         .map_err(|e| Error::invalid(format!("measurement '{}': {e}", m.name)))?;
+    let sensor = if crate::measure::request::needs(&m.kind).sensor_config {
+        sensor_config(spec)?
+    } else {
+        None
+    };
     let inputs = crate::measure::request::Inputs {
         oi,
         si,
+        sensor: sensor.as_ref(),
         object_rects,
         seed: spec.render.seed,
         grid: &spec.render.wavelength,

@@ -19,6 +19,7 @@ pub const UNIT_SUFFIXES: &[&str] = &[
     "rad",
     "sr",
     "dv",
+    "dv2",
     "e",
     "v",
     "mv",

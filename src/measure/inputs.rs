@@ -4,6 +4,7 @@
 
 use crate::image::SensorImage;
 use crate::optical_image::{OpticalImage, Rect};
+use crate::sensor::SensorConfig;
 use crate::spectrum::WavelengthGrid;
 use crate::{Error, Result};
 use std::collections::BTreeMap;
@@ -12,6 +13,8 @@ use std::collections::BTreeMap;
 pub struct Inputs<'a> {
     pub oi: Option<&'a OpticalImage>,
     pub si: Option<&'a SensorImage>,
+    /// The variant's sensor (file + inline properties), when it has one.
+    pub sensor: Option<&'a SensorConfig>,
     /// Per measured object, the film rectangle (full-frame pixels) the render
     /// stage chose for it.
     pub object_rects: &'a BTreeMap<String, Rect>,

@@ -5,7 +5,9 @@
 //! Bayer 10×10) are tested:
 //! 1. **Outliers (dead pixels).** The channel median is converted to electrons
 //!    with the conversion gain; Poisson statistics give σ = √median (plus the
-//!    read noise, if given, in quadrature). A region with any pixel more than
+//!    read noise, if given, in quadrature; on a simulated image also the
+//!    rendering's Monte Carlo variance of the region's pixels, which the paper
+//!    names as the cause of rejections in simulated data). A region with any pixel more than
 //!    `outlier_sigma` (3) σ from the median is rejected. The paper says "from
 //!    the mean"; we use the median it converted, which a dead pixel cannot drag.
 //! 2. **Non-uniformity.** The paper holds out 20 % of the values, fits a
@@ -64,7 +66,7 @@ impl Default for NoiseOptions {
 
 /// `measure "noise"`: the region test's options and what the image supplies
 /// unless written (the seed, the conversion gain).
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct NoiseRequest {
     /// Region size/count, thresholds and channel (`seed` and the conversion
     /// gain in here are replaced by the fields below or the image's).
@@ -76,6 +78,8 @@ pub struct NoiseRequest {
     /// `roi-px`: the part of the image regions are drawn from.
     pub roi_px: Option<Rect>,
     pub input: Option<String>,
+    /// `band-percent` as a fraction: the noise model's band (simulated images).
+    pub band: f64,
 }
 
 /// The properties of `measure "noise"`.
@@ -154,6 +158,13 @@ pub static SCHEMA: crate::params::Schema = crate::params::Schema {
             doc: "cross-validation folds of the uniformity test (2 … 20)",
             example: "4",
         },
+        ParamSpec {
+            name: "band-percent",
+            kind: Kind::Number,
+            default: "95",
+            doc: "on a simulated image: the noise model's band (sensor noise + the render's Monte Carlo noise) that holds this share of regions' standard deviations; reports fraction_in_band (50 ≤ x < 100)",
+            example: "90",
+        },
     ],
 };
 
@@ -187,7 +198,18 @@ pub fn from_params(d: &crate::params::ParamDict) -> std::result::Result<NoiseReq
     if let Some(k) = d.int("fold-count", 2, 20)? {
         o.folds = k as usize;
     }
+    let band = match d.f64("band-percent")? {
+        None => 0.95,
+        Some(x) if (50.0..100.0).contains(&x) => x / 100.0,
+        Some(x) => {
+            return Err(ParamError::value(
+                "band-percent",
+                format!("'band-percent' = {x} is out of range; expected 50 ≤ x < 100"),
+            ));
+        }
+    };
     Ok(NoiseRequest {
+        band,
         options: o,
         seed: d.int("seed", 0, 1 << 53)?,
         conversion_gain_dv_per_e: d.positive("conversion-gain-dv-e")?,
@@ -228,12 +250,15 @@ impl NoiseOptions {
     }
 }
 
-/// Classify one region (pixels of the channel inside `rect`).
+/// Classify one region (pixels of the channel inside `rect`). `extra`: a
+/// per-pixel variance (DV²) known to be in the values beyond Poisson and read
+/// noise (a simulation's rendering noise), added to the outlier test's σ.
 pub fn classify(
     plane: &Plane,
     rect: Rect,
     opts: &NoiseOptions,
     rng: &mut SplitMix64,
+    extra: Option<&Plane>,
 ) -> Result<Region> {
     let ch = if plane.is_mosaic() {
         Some(plane.channel_index(&opts.channel).ok_or_else(|| {
@@ -249,12 +274,14 @@ pub fn classify(
     let mut xs = vec![];
     let mut ys = vec![];
     let mut vs = vec![];
+    let mut extra_sum = 0.0;
     for y in rect.y as usize..(rect.y + rect.h) as usize {
         for x in rect.x as usize..(rect.x + rect.w) as usize {
             if ch.is_none() || plane.channel_at(x, y) == ch {
                 xs.push(x as f64 - rect.x as f64);
                 ys.push(y as f64 - rect.y as f64);
                 vs.push(plane.get(x, y));
+                extra_sum += extra.map_or(0.0, |e| e.get(x, y));
             }
         }
     }
@@ -272,7 +299,9 @@ pub fn classify(
     if n < 6 * opts.folds.max(2) || med_e <= 0.0 {
         return Ok(r);
     }
-    let sigma_e = (med_e + opts.read_noise_e * opts.read_noise_e).sqrt();
+    let k = opts.conversion_gain_dv_per_e;
+    let extra_e2 = extra_sum / n as f64 / (k * k);
+    let sigma_e = (med_e + opts.read_noise_e * opts.read_noise_e + extra_e2).sqrt();
     if vs
         .iter()
         .any(|v| (v / opts.conversion_gain_dv_per_e - med_e).abs() > opts.outlier_sigma * sigma_e)
@@ -316,8 +345,12 @@ pub fn classify(
     Ok(r)
 }
 
-/// Draw `opts.regions` random squares and classify each.
-pub fn uniform_regions(plane: &Plane, opts: &NoiseOptions) -> Result<Vec<Region>> {
+/// Draw `opts.regions` random squares and classify each (`extra`: see [`classify`]).
+pub fn uniform_regions(
+    plane: &Plane,
+    opts: &NoiseOptions,
+    extra: Option<&Plane>,
+) -> Result<Vec<Region>> {
     let s = opts.region_px;
     if s < 2 || plane.width < s || plane.height < s {
         return Err(Error::invalid(format!(
@@ -333,7 +366,13 @@ pub fn uniform_regions(plane: &Plane, opts: &NoiseOptions) -> Result<Vec<Region>
         .map(|_| {
             let x = rng.below((plane.width - s + 1) as u64) as u32;
             let y = rng.below((plane.height - s + 1) as u64) as u32;
-            classify(plane, Rect::new(x, y, s as u32, s as u32), opts, &mut rng)
+            classify(
+                plane,
+                Rect::new(x, y, s as u32, s as u32),
+                opts,
+                &mut rng,
+                extra,
+            )
         })
         .collect()
 }
@@ -344,7 +383,25 @@ pub fn measure(
     opts: &NoiseOptions,
     measurement: &str,
 ) -> Result<(Measured, Vec<Region>)> {
-    let regions = uniform_regions(plane, opts)?;
+    measure_with(plane, opts, None, measurement)
+}
+
+/// [`measure`] with a known extra per-pixel variance (DV²) in the outlier
+/// test (see [`classify`]).
+pub fn measure_with(
+    plane: &Plane,
+    opts: &NoiseOptions,
+    extra: Option<&Plane>,
+    measurement: &str,
+) -> Result<(Measured, Vec<Region>)> {
+    if let Some(e) = extra
+        && (e.width, e.height) != (plane.width, plane.height)
+    {
+        return Err(Error::invalid(
+            "extra variance plane differs in size from the image",
+        ));
+    }
+    let regions = uniform_regions(plane, opts, extra)?;
     let acc: Vec<&Region> = regions
         .iter()
         .filter(|r| r.verdict == Verdict::Accepted)

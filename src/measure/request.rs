@@ -12,11 +12,13 @@ use super::colorimetry::ColorimetryOptions;
 use super::compare::CompareOptions;
 use super::compare_curve::CompareCurveOptions;
 use super::convergence::ConvergenceOptions;
+use super::conversion_gain::ConversionGainOptions;
 use super::mcc::MccRequest;
 use super::noise::NoiseRequest;
 use super::plane::Plane;
 use super::profile::ProfileRequest;
 use super::ri::RiRequest;
+use super::sensor_calibration::CalibrationOptions;
 use super::sfr::SfrRequest;
 use crate::params::{ParamDict, ParamError, Params, Schema, Value};
 use crate::{Error, Result};
@@ -35,6 +37,8 @@ pub const KINDS: &[&str] = &[
     "compare",
     "compare-curve",
     "convergence",
+    "conversion-gain",
+    "sensor-calibration",
 ];
 
 /// The schema of `measure "<kind>"`.
@@ -49,6 +53,8 @@ pub fn schema(kind: &str) -> Option<&'static Schema> {
         "compare" => &super::compare::SCHEMA,
         "compare-curve" => &super::compare_curve::SCHEMA,
         "convergence" => &super::convergence::SCHEMA,
+        "conversion-gain" => &super::conversion_gain::SCHEMA,
+        "sensor-calibration" => &super::sensor_calibration::SCHEMA,
         _ => return None,
     })
 }
@@ -70,6 +76,8 @@ pub enum MeasureOptions {
     Compare(CompareOptions),
     CompareCurve(CompareCurveOptions),
     Convergence(ConvergenceOptions),
+    ConversionGain(ConversionGainOptions),
+    SensorCalibration(CalibrationOptions),
 }
 
 /// Read the properties of `measure "<kind>"` (without `name`/`of`, which the
@@ -99,6 +107,12 @@ pub fn options(kind: &str, params: &Params, base_dir: &Path) -> Result<MeasureOp
             MeasureOptions::CompareCurve(super::compare_curve::from_params(&d, base_dir)?)
         }
         "convergence" => MeasureOptions::Convergence(super::convergence::from_params(&d)?),
+        "conversion-gain" => {
+            MeasureOptions::ConversionGain(super::conversion_gain::from_params(&d)?)
+        }
+        "sensor-calibration" => {
+            MeasureOptions::SensorCalibration(super::sensor_calibration::from_params(&d)?)
+        }
         _ => unreachable!("schema() knows the kind"),
     };
     d.finish()?;
@@ -126,6 +140,8 @@ impl MeasureOptions {
             MeasureOptions::Compare(_) => "compare",
             MeasureOptions::CompareCurve(_) => "compare-curve",
             MeasureOptions::Convergence(_) => "convergence",
+            MeasureOptions::ConversionGain(_) => "conversion-gain",
+            MeasureOptions::SensorCalibration(_) => "sensor-calibration",
         }
     }
 
@@ -165,6 +181,16 @@ impl MeasureOptions {
                 Err(ParamError::section("convergence needs spp=(…)")
                     .with_help("e.g. spp=(16 64 256): at least two increasing sample counts"))
             }
+            MeasureOptions::ConversionGain(c)
+                if c.reference.is_some_and(|(m, v)| m.is_nan() || v.is_nan()) =>
+            {
+                Err(ParamError::section(
+                    "conversion-gain: reference-mean-dv and reference-variance-dv2 go together",
+                )
+                .with_help(
+                    "e.g. reference-mean-dv=320.7 reference-variance-dv2=57.8 (Fig. 11's caption)",
+                ))
+            }
             _ => Ok(()),
         }
     }
@@ -177,21 +203,41 @@ pub struct Needs {
     pub optical_image: bool,
     /// The sensor image (implies the optical image).
     pub sensor_image: bool,
+    /// The variant's sensor configuration only (no scene, no render): the
+    /// measurement synthesises its own frames through the sensor pipeline.
+    pub sensor_config: bool,
+}
+
+impl Needs {
+    /// What either of two measurements needs.
+    pub fn union(self, o: Needs) -> Needs {
+        Needs {
+            optical_image: self.optical_image || o.optical_image,
+            sensor_image: self.sensor_image || o.sensor_image,
+            sensor_config: self.sensor_config || o.sensor_config,
+        }
+    }
 }
 
 /// Stage requirements per measurement kind. `colorimetry` reads a spectrum
-/// only; `ri` and `convergence` can work on the optical image; every other
-/// kind measures sensor digital values.
+/// only; `conversion-gain` and `sensor-calibration` the sensor's
+/// configuration only; `ri` and `convergence` can work on the optical image;
+/// every other kind measures sensor digital values.
 pub fn needs(kind: &str) -> Needs {
     match kind {
         "colorimetry" | "compare" | "compare-curve" => Needs::default(),
+        "conversion-gain" | "sensor-calibration" => Needs {
+            sensor_config: true,
+            ..Needs::default()
+        },
         "ri" | "convergence" => Needs {
             optical_image: true,
-            sensor_image: false,
+            ..Needs::default()
         },
         _ => Needs {
             optical_image: true,
             sensor_image: true,
+            sensor_config: true,
         },
     }
 }
@@ -205,6 +251,13 @@ pub fn run(name: &str, of: &[String], opts: &MeasureOptions, inp: &Inputs) -> Re
     let need_si = || {
         inp.si
             .ok_or_else(|| Error::invalid(format!("measurement '{name}' needs a sensor image")))
+    };
+    let need_sensor = || {
+        inp.sensor.ok_or_else(|| {
+            Error::invalid(format!(
+                "measurement '{name}' needs a sensor (add sensor \"sensors/….kdl\")"
+            ))
+        })
     };
     let no_of = || -> Result<()> {
         if of.is_empty() {
@@ -238,8 +291,12 @@ pub fn run(name: &str, of: &[String], opts: &MeasureOptions, inp: &Inputs) -> Re
             no_of()?;
             let si = need_si()?;
             let mut plane = Plane::from_sensor(si)?;
-            if let Some(roi) = r.roi_px {
-                plane = plane.crop(to_window(roi, si.window, "roi-px")?)?;
+            let crop = r
+                .roi_px
+                .map(|roi| to_window(roi, si.window, "roi-px"))
+                .transpose()?;
+            if let Some(c) = crop {
+                plane = plane.crop(c)?;
             }
             let opts = super::noise::NoiseOptions {
                 conversion_gain_dv_per_e: r
@@ -248,7 +305,33 @@ pub fn run(name: &str, of: &[String], opts: &MeasureOptions, inp: &Inputs) -> Re
                 seed: r.seed.unwrap_or(inp.seed),
                 ..r.options.clone()
             };
-            Ok(super::noise::measure(&plane, &opts, name)?.0)
+            // On a rendered image: the render's Monte Carlo variance per
+            // pixel (in the outlier test's σ) and the noise model's prediction.
+            let mc = match (inp.sensor, inp.oi) {
+                (Some(cfg), Some(oi)) => {
+                    let mut mc = super::noise_model::mc_variance_plane(cfg, si, oi, name)?;
+                    if let Some(c) = crop {
+                        mc = mc.crop(c)?;
+                    }
+                    Some((cfg, mc))
+                }
+                _ => None,
+            };
+            let (mut out, regions) =
+                super::noise::measure_with(&plane, &opts, mc.as_ref().map(|m| &m.1), name)?;
+            if let Some((cfg, mc)) = &mc {
+                super::noise_model::add_model(
+                    &mut out,
+                    &regions,
+                    &plane,
+                    mc,
+                    cfg,
+                    &opts.channel,
+                    r.band,
+                    name,
+                )?;
+            }
+            Ok(out)
         }
         MeasureOptions::Ri(r) => {
             no_of()?;
@@ -291,6 +374,14 @@ pub fn run(name: &str, of: &[String], opts: &MeasureOptions, inp: &Inputs) -> Re
                 ..Default::default()
             };
             super::ri::relative_illumination(&plane, &opts, name)
+        }
+        MeasureOptions::ConversionGain(o) => {
+            no_of()?;
+            super::conversion_gain::measure(need_sensor()?, o, inp.seed, name)
+        }
+        MeasureOptions::SensorCalibration(o) => {
+            no_of()?;
+            super::sensor_calibration::measure(need_sensor()?, o, inp.seed, name)
         }
         MeasureOptions::Compare(_)
         | MeasureOptions::CompareCurve(_)

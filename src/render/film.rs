@@ -124,7 +124,30 @@ pub fn render_world(
     );
     let row_len = roi.w as usize * nb;
 
-    let work = |((((row, irr), se), lab), dep): RowSlices| -> u64 {
+    // Standard errors of weighted band sums (e.g. a sensor channel's electron
+    // rate), from the same batch means: bands of one path are correlated, so
+    // these cannot be formed from the per-band errors afterwards.
+    let wsets: Vec<&[f32]> = s
+        .stderr_weights
+        .iter()
+        .map(|w| w.as_slice())
+        .filter(|w| w.len() == nb)
+        .collect();
+    if wsets.len() != s.stderr_weights.len() {
+        return Err(Error::invalid(format!(
+            "stderr weights must have one value per band ({nb})"
+        )));
+    }
+    let nsets = wsets.len();
+    let work = |((((row, irr), se), lab), dep): RowSlices| -> (u64, Vec<f32>) {
+        let mut wse = vec![
+            0f32;
+            if batches > 1 {
+                roi.w as usize * nsets
+            } else {
+                0
+            }
+        ];
         let py = roi.y + row as u32;
         let mut sc = Scratch::new(world.bands_padded);
         let mut acc = vec![0.0f64; nb * batches];
@@ -232,12 +255,22 @@ pub fn render_world(
                 for (o, &q) in se[ix * nb..(ix + 1) * nb].iter_mut().zip(ss_px.iter()) {
                     *o = (q / denom).sqrt() as f32;
                 }
+                for (k, w) in wsets.iter().enumerate() {
+                    let mw: f64 = w.iter().zip(&mean_px).map(|(&a, &m)| a as f64 * m).sum();
+                    let mut q = 0.0f64;
+                    for (a, &c) in acc.chunks_exact(nb).zip(&counts) {
+                        let c = c.max(1) as f64;
+                        let m: f64 = w.iter().zip(a).map(|(&wb, &x)| wb as f64 * x / c).sum();
+                        q += (m - mw) * (m - mw);
+                    }
+                    wse[ix * nsets + k] = (q / denom).sqrt() as f32;
+                }
             }
         }
-        nan
+        (nan, wse)
     };
 
-    let run = |img: &mut OpticalImage| -> u64 {
+    let run = |img: &mut OpticalImage| -> Vec<(u64, Vec<f32>)> {
         img.irradiance
             .par_chunks_mut(row_len)
             .enumerate()
@@ -245,9 +278,9 @@ pub fn render_world(
             .zip(img.labels.par_chunks_mut(roi.w as usize))
             .zip(img.depth_m.par_chunks_mut(roi.w as usize))
             .map(work)
-            .sum()
+            .collect::<Vec<_>>()
     };
-    let nan = if s.threads > 0 {
+    let rows = if s.threads > 0 {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(s.threads)
             .build()
@@ -256,6 +289,10 @@ pub fn render_world(
     } else {
         run(&mut img)
     };
+    let nan = rows.iter().map(|r| r.0).sum();
+    if nsets > 0 && batches > 1 {
+        img.weighted_stderr = rows.into_iter().flat_map(|r| r.1).collect();
+    }
     img.nan_count = nan;
     img.render_s = start.elapsed().as_secs_f64();
     Ok(img)

@@ -92,6 +92,11 @@ pub struct RenderSettings {
     pub threads: usize,
     /// Render only this pixel rectangle of the film.
     pub roi: Option<Rect>,
+    /// Band weight sets (one weight per band each) whose weighted band sums
+    /// get a per-pixel standard error too (`OpticalImage::weighted_stderr`),
+    /// e.g. a sensor's channel electron rates. Empty: none.
+    #[serde(default)]
+    pub stderr_weights: Vec<Vec<f32>>,
 }
 
 impl Default for RenderSettings {
@@ -104,6 +109,7 @@ impl Default for RenderSettings {
             batches: 8,
             threads: 0,
             roi: None,
+            stderr_weights: vec![],
         }
     }
 }

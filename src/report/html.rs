@@ -4,15 +4,19 @@
 //! a strict Content-Security-Policy forbids any network access.
 //!
 //! Plots: every curve name of a measurement becomes one chart with one
-//! series per variant; curves named `chart#series` (an overlay: simulated,
-//! reference, noise floor) are series of one chart `chart`. Curves named
-//! `*_vs_time` are drawn on log–log axes, `scatter` with the identity line,
-//! `std_vs_mean` as points. When the variants sweep a
+//! series per variant (curves named `*_vs_time` on log–log axes; `scatter`
+//! with the identity line; `std_vs_mean` as points). Curves named
+//! `<chart>#<series>` share the chart `<chart>` (an overlay: simulated,
+//! reference, noise floor, a model curve), one series each (per variant when
+//! there are several; a series equal to one already drawn, such as a
+//! reference every variant repeats, is drawn once), styled by the series
+//! name: `counts` as histogram bars, `points…`/`regions…`/`levels…` as
+//! points, anything else as a line. When the variants sweep a
 //! numeric parameter, each figure of a measurement with at most 10 figures is
 //! also plotted against it, with ±1 se. Tables have a row per variant, or a
 //! row per quantity when a measurement has more than 10 (e.g. MCC means).
 
-use super::plot::{PlotSpec, Series, drawable_points, plot_svg};
+use super::plot::{PlotSpec, Series, Style, drawable_points, plot_svg};
 use super::results::{ResultRow, read_curves, read_results};
 use crate::{Error, Result};
 use serde::Serialize;
@@ -297,6 +301,20 @@ fn html_escape(s: &str) -> String {
         .replace('"', "&quot;")
 }
 
+/// The style of series `<chart>#<name>` (see the module docs).
+fn series_style(name: &str) -> Style {
+    if name == "counts" {
+        Style::Bars
+    } else if ["points", "regions", "levels"]
+        .iter()
+        .any(|p| name.starts_with(p))
+    {
+        Style::Points
+    } else {
+        Style::Line
+    }
+}
+
 fn curve_spec(measurement: &str, name: &str, c: &crate::measure::Curve) -> PlotSpec {
     let lbl = |n: &str, u: &str| {
         if u.is_empty() || u == "1" {
@@ -444,10 +462,8 @@ pub fn write_report(dir: &Path) -> Result<()> {
                 continue;
             }
             for c in read_curves(&p)? {
-                // `chart#series` curves share one chart (an overlay); a series
-                // equal to one already drawn (a reference repeated by every
-                // variant) is drawn once, named by its tag alone.
-                let (chart, tag) = match c.name.split_once('#') {
+                // `chart#series` curves share one chart (an overlay)
+                let (chart, part) = match c.name.split_once('#') {
                     Some((a, b)) => (a.to_string(), Some(b.to_string())),
                     None => (c.name.clone(), None),
                 };
@@ -457,11 +473,19 @@ pub fn write_report(dir: &Path) -> Result<()> {
                 });
                 let points: Vec<(f64, f64)> =
                     c.x.iter().copied().zip(c.y.iter().copied()).collect();
-                let name = match &tag {
-                    Some(t) => format!("{v} · {t}"),
-                    None => v.clone(),
+                let (name, style) = match &part {
+                    None => (v.clone(), None),
+                    Some(sn) => (
+                        if variants.len() > 1 {
+                            format!("{v} · {sn}")
+                        } else {
+                            sn.clone()
+                        },
+                        Some(series_style(sn)),
+                    ),
                 };
-                if let Some(t) = &tag {
+                if let Some(t) = &part {
+                    // drawn already (a reference repeated by every variant): once, by its tag
                     let suffix = format!(" · {t}");
                     if let Some(s) = e
                         .1
@@ -476,6 +500,7 @@ pub fn write_report(dir: &Path) -> Result<()> {
                     name,
                     points,
                     stderr: c.stderr.clone(),
+                    style,
                 });
             }
         }
@@ -517,6 +542,7 @@ pub fn write_report(dir: &Path) -> Result<()> {
                     name: q.clone(),
                     points: pts.iter().map(|p| (p.0, p.1)).collect(),
                     stderr: pts.iter().map(|p| p.2).collect(),
+                    style: None,
                 };
                 pid += 1;
                 plots.extend(plot_for(format!("plot{pid}"), spec, vec![s]));
@@ -648,6 +674,7 @@ fn summary_out(
                 name: series,
                 points: c.x.iter().copied().zip(c.y.iter().copied()).collect(),
                 stderr: c.stderr.clone(),
+                style: None,
             });
         }
         for (_, spec, series) in by {

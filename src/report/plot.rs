@@ -1,6 +1,8 @@
 //! Plots for the HTML report, drawn with plotters' SVG backend: line charts
 //! (optionally log–log, with a ±1 standard-error band) and scatter plots
-//! (optionally with the identity line). Axis labels carry units.
+//! (optionally with the identity line). Axis labels carry units. A series may
+//! set its own style ([`Style`]): points, a line or histogram bars, so one
+//! chart holds e.g. a histogram with its model curve.
 
 use crate::{Error, Result};
 use plotters::prelude::*;
@@ -11,6 +13,17 @@ pub struct Series {
     pub points: Vec<(f64, f64)>,
     /// Standard error per point (empty: none).
     pub stderr: Vec<f64>,
+    /// How the series is drawn; None: the chart's (`PlotSpec::scatter`).
+    pub style: Option<Style>,
+}
+
+/// How one series is drawn.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Style {
+    Points,
+    Line,
+    /// Histogram bars centred on each x, as wide as the x spacing.
+    Bars,
 }
 
 #[derive(Clone, Debug, Default)]
@@ -168,7 +181,12 @@ pub fn plot_svg(spec: &PlotSpec, series: &[Series]) -> Result<String> {
                         .copied()
                         .filter(|&(x, y)| ok(x, y))
                         .collect();
-                    if s.stderr.len() == s.points.len() && !spec.scatter {
+                    let style = s.style.unwrap_or(if spec.scatter {
+                        Style::Points
+                    } else {
+                        Style::Line
+                    });
+                    if s.stderr.len() == s.points.len() && style == Style::Line {
                         let band: Vec<(f64, f64)> = s
                             .points
                             .iter()
@@ -191,14 +209,32 @@ pub fn plot_svg(spec: &PlotSpec, series: &[Series]) -> Result<String> {
                                 .map_err(|x| e(&x))?;
                         }
                     }
-                    if spec.scatter {
-                        chart
+                    match style {
+                        Style::Points => chart
                             .draw_series(p.iter().map(|&q| Circle::new(q, 3, c.filled())))
-                            .map_err(|x| e(&x))?;
-                    } else {
-                        chart
+                            .map_err(|x| e(&x))
+                            .map(|_| ())?,
+                        Style::Line => chart
                             .draw_series(LineSeries::new(p.clone(), c.stroke_width(2)))
-                            .map_err(|x| e(&x))?;
+                            .map_err(|x| e(&x))
+                            .map(|_| ())?,
+                        Style::Bars => {
+                            let w = p
+                                .windows(2)
+                                .map(|q| (q[1].0 - q[0].0).abs())
+                                .filter(|d| *d > 0.0)
+                                .fold(f64::INFINITY, f64::min);
+                            let w = if w.is_finite() { w } else { 1.0 };
+                            let base = if spec.log_y { y0 } else { 0.0f64.max(y0) };
+                            chart
+                                .draw_series(p.iter().map(|&(x, y)| {
+                                    Rectangle::new(
+                                        [(x - 0.45 * w, base), (x + 0.45 * w, y)],
+                                        c.mix(0.55).filled(),
+                                    )
+                                }))
+                                .map_err(|x| e(&x))?;
+                        }
                     }
                 }
             }};
@@ -223,6 +259,7 @@ mod tests {
             name: "a".into(),
             points: vec![(1.0, 1.0), (10.0, 0.1), (100.0, 0.01)],
             stderr: vec![0.1, 0.01, 0.001],
+            style: None,
         };
         let spec = PlotSpec {
             title: "err".into(),
@@ -242,6 +279,7 @@ mod tests {
             name: "b".into(),
             points: vec![(f64::NAN, 1.0)],
             stderr: vec![],
+            style: None,
         };
         assert!(plot_svg(&PlotSpec::default(), &[empty]).is_err());
     }

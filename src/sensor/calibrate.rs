@@ -12,8 +12,9 @@
 //! variances (for a variance s², Var(s²) ≈ (m₄ − s⁴)/n); K is a weighted
 //! least-squares slope through the origin (weights from each point's variance SE),
 //! inflated by √(χ²/(n−1)) when the points scatter more than their SEs; quantities in
-//! electrons add K's relative error in quadrature. Saturation adds the level spacing
-//! around the variance maximum (uniform, half-width / √3).
+//! electrons add K's relative error in quadrature. Saturation (the variance
+//! maximum) adds the level spacing around it and the width of the plateau of
+//! levels whose variance is within 2 SE of the maximum (each uniform, half-width / √3).
 
 use crate::figure::Figure;
 
@@ -37,6 +38,14 @@ fn moments(v: &[f64]) -> (f64, f64, f64, f64) {
     (m, m2 / (n - 1.0), m3 / n, m4 / n)
 }
 
+/// Eq. 12 of Appendix III on given moments: α = (V − E²σ_p²) / (E (1 + σ_p²)),
+/// with E the mean and V the variance of the digital values above black, and
+/// σ_p the PRNU as a fraction.
+pub fn alpha_eq12(mean_dv: f64, variance_dv2: f64, prnu: f64) -> f64 {
+    let p2 = prnu * prnu;
+    (variance_dv2 - mean_dv * mean_dv * p2) / (mean_dv * (1.0 + p2))
+}
+
 /// Appendix III (Eq. 12). `dv_above_black`: pooled pixel values (all crops, all
 /// frames) with the black level subtracted; `prnu`: PRNU as a fraction.
 pub fn conversion_gain_appendix3(dv_above_black: &[f64], prnu: f64) -> Result<Estimate, String> {
@@ -54,7 +63,7 @@ pub fn conversion_gain_appendix3(dv_above_black: &[f64], prnu: f64) -> Result<Es
         ));
     }
     let p2 = prnu * prnu;
-    let alpha = (v - m * m * p2) / (m * (1.0 + p2));
+    let alpha = alpha_eq12(m, v, prnu);
     let da_dv = 1.0 / (m * (1.0 + p2));
     let da_dm = -(v + m * m * p2) / (m * m * (1.0 + p2));
     let var_m = v / n;
@@ -170,6 +179,9 @@ pub struct PhotonTransfer {
     pub saturation_e: Option<Estimate>,
     /// Dark current, e⁻/s (None with fewer than two dark exposures).
     pub dark_current_e_per_s: Option<Estimate>,
+    /// Dark signal growth, DV/s: the slope behind `dark_current_e_per_s`, before
+    /// the division by K (so its SE does not carry K's).
+    pub dark_signal_dv_per_s: Option<Estimate>,
     /// Appendix III conversion gain from the brightest level of the K fit, using the
     /// PRNU measured here (its SE includes the PRNU estimate's SE).
     pub appendix3_dv_per_e: Option<Estimate>,
@@ -381,10 +393,23 @@ pub fn photon_transfer(seqs: &[FlatSequence]) -> Result<PhotonTransfer, String> 
         stderr: prnu_se,
     };
     let saturation_e = if saturated {
+        // EMVA's saturation is the level of largest variance. Near its
+        // maximum the variance curve is flat, so its SE has two parts: the
+        // level spacing around it (uniform, half-width / √3) and the plateau
+        // of levels whose variance is within 2 SE of the largest, any of which
+        // could be the maximum (its half-width / √3).
         let x = pt(lights[imax]).0;
         let lo = if imax > 0 { pt(lights[imax - 1]).0 } else { x };
         let hi = pt(lights[imax + 1]).0;
-        let spacing = (hi - lo) / 2.0 / 3f64.sqrt();
+        let (ymax, semax) = (pt(lights[imax]).1, pt(lights[imax]).2);
+        let near: Vec<f64> = lights
+            .iter()
+            .map(|&i| pt(i))
+            .filter(|&(_, y, se)| ymax - y <= 2.0 * (se * se + semax * semax).sqrt())
+            .map(|p| p.0)
+            .collect();
+        let (p0, p1) = near.iter().fold((x, x), |(a, b), &v| (a.min(v), b.max(v)));
+        let spacing = ((hi - lo) / 2.0 / 3f64.sqrt()).hypot((p1 - p0) / 2.0 / 3f64.sqrt());
         let v = x / k;
         Some(Estimate {
             value: v,
@@ -394,7 +419,7 @@ pub fn photon_transfer(seqs: &[FlatSequence]) -> Result<PhotonTransfer, String> 
         None
     };
     // dark current: slope of μ_dark vs exposure (unweighted LS with intercept)
-    let dark_current_e_per_s = if darks.len() >= 2 {
+    let dark_slope = if darks.len() >= 2 {
         let ts: Vec<f64> = darks.iter().map(|&i| levels[i].exposure_s).collect();
         let ms: Vec<f64> = darks.iter().map(|&i| levels[i].mean).collect();
         let n = ts.len() as f64;
@@ -417,11 +442,9 @@ pub fn photon_transfer(seqs: &[FlatSequence]) -> Result<PhotonTransfer, String> 
                         / levels[i].pixels as f64
                 })
                 .sum::<f64>();
-            let se = var_means.sqrt() / stt;
-            let v = slope / k;
             Some(Estimate {
-                value: v,
-                stderr: ((se / k).powi(2) + (v * rk).powi(2)).sqrt(),
+                value: slope,
+                stderr: var_means.sqrt() / stt,
             })
         } else {
             None
@@ -429,6 +452,13 @@ pub fn photon_transfer(seqs: &[FlatSequence]) -> Result<PhotonTransfer, String> 
     } else {
         None
     };
+    let dark_current_e_per_s = dark_slope.map(|d| {
+        let v = d.value / k;
+        Estimate {
+            value: v,
+            stderr: ((d.stderr / k).powi(2) + (v * rk).powi(2)).sqrt(),
+        }
+    });
     // Appendix III on the brightest fitted level, pooled values minus the dark mean
     let appendix3_dv_per_e = fit
         .iter()
@@ -448,6 +478,7 @@ pub fn photon_transfer(seqs: &[FlatSequence]) -> Result<PhotonTransfer, String> 
         prnu,
         saturation_e,
         dark_current_e_per_s,
+        dark_signal_dv_per_s: dark_slope,
         appendix3_dv_per_e,
         levels,
         fit_levels: fit,

@@ -305,3 +305,67 @@ pub fn read_flat_sequences(dir: &Path, channel: &str) -> Result<Vec<(PathBuf, Fl
         .map(|d| read_flat_sequence(&d, channel).map(|s| (d, s)))
         .collect()
 }
+
+/// The flat (wavelength-independent) irradiance, W/(m²·nm), that gives CFA
+/// channel `channel` a mean signal of `signal_e` electrons in `exposure_s`
+/// (on axis, dark current not included).
+pub fn flat_for_signal(
+    cfg: &SensorConfig,
+    channel: usize,
+    signal_e: f64,
+    exposure_s: f64,
+) -> Result<Spectrum> {
+    let unit = Spectrum::constant("flat", 1.0);
+    let rate = flat_rate_e_per_s(cfg, &unit, &grid())
+        .get(channel)
+        .copied()
+        .unwrap_or(0.0);
+    if !(rate > 0.0 && exposure_s > 0.0 && signal_e >= 0.0 && signal_e.is_finite()) {
+        return Err(Error::invalid(format!(
+            "sensor '{}': no flat irradiance gives {signal_e} e⁻ in {exposure_s} s (channel rate {rate} e⁻/s per W/(m²·nm))",
+            cfg.name
+        )));
+    }
+    flat_spectrum(signal_e / (rate * exposure_s), None)
+}
+
+/// A flat-field (or dark) sequence simulated in memory: `frames` frames of
+/// `window` (full-frame pixels) at `exposure_s` under `irradiance` (None:
+/// dark frames), keeping the pixels of CFA channel `channel` — what
+/// [`write_flat_sequence`] followed by [`read_flat_sequence`] gives, without
+/// the files. Frame `i` uses [`frame_seed`]`(seed, i)`.
+pub fn flat_sequence(
+    cfg: &SensorConfig,
+    irradiance: Option<&Spectrum>,
+    exposure_s: f64,
+    window: Rect,
+    frames: usize,
+    seed: u64,
+    channel: usize,
+) -> Result<FlatSequence> {
+    let mut c = cfg.clone();
+    c.exposure = Exposure::Seconds(exposure_s);
+    let zero = Spectrum::constant("dark", 0.0);
+    let dark = irradiance.is_none();
+    let spec = irradiance.unwrap_or(&zero);
+    let mut out = Vec::with_capacity(frames);
+    for i in 0..frames {
+        let f = simulate_flat(&c, spec, &grid(), window, frame_seed(seed, i))?;
+        let im = &f.image;
+        let mut px = vec![];
+        for y in 0..im.height() {
+            for x in 0..im.width() {
+                if c.cfa.channel_at(window.x + x, window.y + y) == channel {
+                    px.push(im.dv_at(x, y) as f64);
+                }
+            }
+        }
+        out.push(px);
+    }
+    Ok(FlatSequence {
+        exposure_s,
+        dark,
+        frames: out,
+        white_level_dv: c.white_level_dv(),
+    })
+}

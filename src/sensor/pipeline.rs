@@ -131,6 +131,12 @@ fn check_config(cfg: &SensorConfig) -> Result<()> {
         .map_err(|m| Error::invalid(format!("sensor '{}': {m}", cfg.name)))
 }
 
+/// Relative-illumination factor of full-frame pixel (x, y) of a sensor of
+/// `full` (cols, rows) pixels (1 when the sensor has none or it is switched off).
+pub fn relative_illumination_at(cfg: &SensorConfig, full: (u32, u32), x: u32, y: u32) -> f64 {
+    ri_at(cfg, full, x, y)
+}
+
 /// Relative-illumination factor of full-frame pixel (x, y).
 fn ri_at(cfg: &SensorConfig, full: (u32, u32), x: u32, y: u32) -> f64 {
     if !ri_active(cfg) {

@@ -61,6 +61,7 @@ pub fn probe(kind: &str, name: &str, opts: &MeasureOptions) -> Option<Value> {
             "outlier-sigma" => num(r.options.outlier_sigma),
             "nonuniform-ratio" => num(r.options.nonuniform_ratio),
             "fold-count" => num(r.options.folds as f64),
+            "band-percent" => num(r.band * 100.0),
             _ => None,
         },
         ("profile", MeasureOptions::Profile(r)) => match name {
@@ -114,6 +115,36 @@ pub fn probe(kind: &str, name: &str, opts: &MeasureOptions) -> Option<Value> {
             "spp" => list(&c.spp.iter().map(|s| *s as f64).collect::<Vec<_>>()),
             "reference-spp" => c.reference_spp.and_then(|s| num(s as f64)),
             "quantity" => c.quantity.as_deref().and_then(text),
+            _ => None,
+        },
+        ("conversion-gain", MeasureOptions::ConversionGain(c)) => match name {
+            "mean-dv" => num(c.mean_dv),
+            "frame-count" => num(c.frames as f64),
+            "exposure-s" => num(c.exposure_s),
+            "roi-px" => rect(c.roi_px),
+            "channel" => text(&c.channel),
+            "prnu-percent" => c.prnu.and_then(|p| num(p * 100.0)),
+            "reference-mean-dv" => c
+                .reference
+                .map(|r| r.0)
+                .filter(|x| !x.is_nan())
+                .and_then(num),
+            "reference-variance-dv2" => c
+                .reference
+                .map(|r| r.1)
+                .filter(|x| !x.is_nan())
+                .and_then(num),
+            _ => None,
+        },
+        ("sensor-calibration", MeasureOptions::SensorCalibration(c)) => match name {
+            "level-count" => num(c.levels as f64),
+            "frame-count" => num(c.frames as f64),
+            "exposure-s" => num(c.exposure_s),
+            "max-level-fraction" => num(c.max_level_fraction),
+            "dark-exposure-s" => list(&c.dark_exposures_s),
+            "roi-px" => rect(c.roi_px),
+            "channel" => text(&c.channel),
+            "tolerance-percent" => num(c.tolerance_percent),
             _ => None,
         },
         _ => None,
