@@ -44,6 +44,24 @@ pub struct RunArgs {
     /// Run shard i of n (1-based), e.g. --shard 2/8.
     #[arg(long)]
     pub shard: Option<String>,
+    /// Render every optical image afresh: neither read nor write the
+    /// optical-image cache (<out>/.cache/optical-images).
+    #[arg(long)]
+    pub no_cache: bool,
+    /// Size limit of the optical-image cache in GB (10⁹ bytes); the least
+    /// recently used images are removed beyond it.
+    #[arg(long, value_name = "X", default_value_t = experiment::oi_cache::DEFAULT_MAX_GB, value_parser = parse_gb)]
+    pub cache_max_gb: f64,
+}
+
+/// A positive, finite size in GB.
+fn parse_gb(s: &str) -> std::result::Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(x) if x.is_finite() && x > 0.0 => Ok(x),
+        _ => Err(format!(
+            "expected a positive number of GB (e.g. 4 or 0.5), got '{s}'"
+        )),
+    }
 }
 
 #[derive(Args)]
@@ -162,7 +180,14 @@ impl Progress for Bar {
     fn variant(&mut self, experiment: &str, id: &str, o: &Outcome) {
         self.done += 1;
         let status = match o {
-            Outcome::Done { figures, total_s } => format!("ok ({figures} figures, {total_s:.3} s)"),
+            Outcome::Done {
+                figures,
+                total_s,
+                oi_cache,
+            } => match oi_cache {
+                Some(c) => format!("ok ({figures} figures, {total_s:.3} s, oi cache {c})"),
+                None => format!("ok ({figures} figures, {total_s:.3} s)"),
+            },
             Outcome::Cached => "cached".into(),
             Outcome::Failed(e) => format!("FAILED: {e}"),
         };
@@ -219,6 +244,8 @@ pub fn run(a: RunArgs) -> Result<i32> {
         max_spp: a.max_spp,
         shard,
         interrupted: interrupted.clone(),
+        oi_cache: (!a.no_cache)
+            .then(|| experiment::oi_cache::OiCache::under(&a.out, a.cache_max_gb)),
     };
     let mut code = 0;
     let mut ran = 0;

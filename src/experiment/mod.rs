@@ -22,6 +22,7 @@ pub mod check;
 pub mod embedded;
 pub mod language;
 pub mod measured;
+pub mod oi_cache;
 pub mod parse;
 pub mod plan;
 pub mod results;

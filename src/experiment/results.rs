@@ -110,6 +110,13 @@ pub struct VariantRecord {
     pub error: Option<String>,
     pub render_s: Option<f64>,
     pub total_s: Option<f64>,
+    /// Where its optical image came from: `hit`, `miss` or `off` (`--no-cache`);
+    /// absent when the variant renders none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub oi_cache: Option<String>,
+    /// The optical image's cache key (hex SHA-256 of everything the render reads).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub oi_hash: Option<String>,
     /// The resolved spec of the variant.
     pub spec: serde_json::Value,
 }
@@ -164,6 +171,8 @@ impl Manifest {
                     error: None,
                     render_s: None,
                     total_s: None,
+                    oi_cache: None,
+                    oi_hash: None,
                     spec: serde_json::to_value(&v.variant.spec).unwrap_or_default(),
                 })
                 .collect(),

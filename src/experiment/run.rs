@@ -13,6 +13,7 @@
 //! variant of this process has been written; `CAMSIM_TEST_INTERRUPT_AFTER=N`
 //! behaves as if Ctrl-C were pressed at that moment.
 
+use super::oi_cache::{self, CacheUse, OiCache};
 use super::parse::Parsed;
 use super::plan::{Plan, PlannedVariant};
 use super::results::{ExperimentDir, Manifest, variant_csv};
@@ -36,12 +37,19 @@ pub struct RunOptions {
     pub shard: Option<(usize, usize)>,
     /// Set by a Ctrl-C handler: stop after the variant in flight.
     pub interrupted: Arc<AtomicBool>,
+    /// The optical-image cache (`<out>/.cache/optical-images`), None with `--no-cache`.
+    pub oi_cache: Option<OiCache>,
 }
 
 /// What happened to one variant.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Outcome {
-    Done { figures: usize, total_s: f64 },
+    Done {
+        figures: usize,
+        total_s: f64,
+        /// `hit`, `miss` or `off` when the variant has an optical image.
+        oi_cache: Option<&'static str>,
+    },
     Cached,
     Failed(String),
 }
@@ -106,10 +114,17 @@ pub struct VariantOutput {
     pub curves: Vec<(String, Vec<crate::measure::Curve>)>,
     /// Preview images: (file name, PNG bytes, ROI overlay JSON).
     pub previews: Vec<(String, Vec<u8>, String)>,
+    /// Where the optical image came from (None: the variant renders none).
+    pub oi_cache: Option<CacheUse>,
 }
 
-/// Run the figures of one variant.
+/// Run the figures of one variant (no optical-image cache).
 pub fn run_variant(v: &PlannedVariant) -> Result<VariantOutput> {
+    run_variant_with(v, None)
+}
+
+/// Run the figures of one variant, its optical image through `cache`.
+pub fn run_variant_with(v: &PlannedVariant, cache: Option<&OiCache>) -> Result<VariantOutput> {
     let spec = &v.variant.spec;
     // `save "dng"` needs the sensor image; a measurement that needs only the
     // sensor's configuration renders nothing.
@@ -135,9 +150,26 @@ pub fn run_variant(v: &PlannedVariant) -> Result<VariantOutput> {
         let scene = stages::build_scene(spec)?;
         let camera = stages::build_camera(spec, &scene)?;
         let t = Instant::now();
-        let r = stages::render(spec, &scene, camera.as_ref())?;
-        object_rects = r.object_rects;
-        oi = Some(r.oi);
+        let job = stages::render_job(spec, &scene, camera.as_ref())?;
+        let model = stages::camera_model(spec, &scene)?;
+        let hash = oi_cache::key(&scene, &model, &job.film, &job.settings)?;
+        let (image, status) = match cache.map(|c| (c, c.load(&hash))) {
+            Some((_, Some(o))) => (o, "hit"),
+            Some((c, None)) => {
+                let o = crate::render::render(&scene, camera.as_ref(), &job.film, &job.settings)?;
+                if let Err(e) = c.store(&hash, &o) {
+                    eprintln!("warning: optical image not cached: {e}");
+                }
+                (o, "miss")
+            }
+            None => (
+                crate::render::render(&scene, camera.as_ref(), &job.film, &job.settings)?,
+                "off",
+            ),
+        };
+        object_rects = job.object_rects;
+        oi = Some(image);
+        out.oi_cache = Some(CacheUse { status, hash });
         out.render_s = t.elapsed().as_secs_f64();
     }
     if let Some(o) = &oi {
@@ -254,7 +286,7 @@ pub fn run_plan(plan: &Plan, opts: &RunOptions, progress: &mut dyn Progress) -> 
             Outcome::Cached
         } else {
             let t = Instant::now();
-            match run_variant(v) {
+            match run_variant_with(v, opts.oi_cache.as_ref()) {
                 Ok(vo) => {
                     let (figs, render_s) = (&vo.figures, vo.render_s);
                     // Curves and previews first: a variant CSV on disk means its
@@ -291,6 +323,8 @@ pub fn run_plan(plan: &Plan, opts: &RunOptions, progress: &mut dyn Progress) -> 
                     rec.status = "done".into();
                     rec.render_s = Some(render_s);
                     rec.total_s = Some(total_s);
+                    rec.oi_cache = vo.oi_cache.as_ref().map(|c| c.status.to_string());
+                    rec.oi_hash = vo.oi_cache.as_ref().map(|c| c.hash.clone());
                     sum.done += 1;
                     let n = FINISHED_IN_PROCESS.fetch_add(1, Ordering::SeqCst) + 1;
                     if abort_after.is_some_and(|k| n >= k) {
@@ -302,6 +336,7 @@ pub fn run_plan(plan: &Plan, opts: &RunOptions, progress: &mut dyn Progress) -> 
                     Outcome::Done {
                         figures: figs.len(),
                         total_s,
+                        oi_cache: vo.oi_cache.as_ref().map(|c| c.status),
                     }
                 }
                 Err(e) => {

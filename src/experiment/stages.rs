@@ -260,8 +260,32 @@ pub fn render_settings(spec: &ResolvedExperiment) -> Result<RenderSettings> {
     })
 }
 
+/// What a variant's render is asked to do: the film, the settings (with the
+/// render window and the sensor's standard-error weights) and, per measured
+/// object, the film rectangle chosen for it by the label pass.
+pub struct RenderJob {
+    pub film: FilmSpec,
+    pub settings: RenderSettings,
+    pub object_rects: BTreeMap<String, Rect>,
+}
+
 /// Render the optical image (only the regions the measurements read).
 pub fn render(spec: &ResolvedExperiment, scene: &Scene, camera: &dyn Camera) -> Result<Rendered> {
+    let job = render_job(spec, scene, camera)?;
+    let oi = crate::render::render(scene, camera, &job.film, &job.settings)?;
+    Ok(Rendered {
+        oi,
+        object_rects: job.object_rects,
+    })
+}
+
+/// The film, settings and render window of a variant's render (the label
+/// pass that finds the window is cheap: ≤ 512 px, 1 spp, primary hits only).
+pub fn render_job(
+    spec: &ResolvedExperiment,
+    scene: &Scene,
+    camera: &dyn Camera,
+) -> Result<RenderJob> {
     let film = film_spec(spec, scene)?;
     let (roi, object_rects) = match wanted_objects(spec) {
         Some(objs) if !objs.is_empty() => {
@@ -284,8 +308,11 @@ pub fn render(spec: &ResolvedExperiment, scene: &Scene, camera: &dyn Camera) -> 
         stderr_weights,
         ..render_settings(spec)?
     };
-    let oi = crate::render::render(scene, camera, &film, &settings)?;
-    Ok(Rendered { oi, object_rects })
+    Ok(RenderJob {
+        film,
+        settings,
+        object_rects,
+    })
 }
 
 /// Turn the optical image into sensor digital values.

@@ -108,6 +108,8 @@ struct VariantRow {
     params: Vec<String>,
     render_s: String,
     total_s: String,
+    /// `hit`, `miss`, `off` (optical-image cache) or `—`.
+    oi_cache: String,
 }
 
 #[derive(Serialize)]
@@ -365,6 +367,18 @@ pub fn write_report(dir: &Path) -> Result<()> {
                 params: rs[0].params.iter().map(|p| p.1.clone()).collect(),
                 render_s: fmt_num(rs.iter().map(|r| r.render_s).fold(0.0, f64::max)),
                 total_s: fmt_num(rs.iter().map(|r| r.total_s).fold(0.0, f64::max)),
+                oi_cache: manifest
+                    .as_ref()
+                    .and_then(|m| m.get("variants"))
+                    .and_then(|vs| vs.as_array())
+                    .and_then(|vs| {
+                        vs.iter()
+                            .find(|x| x.get("id").and_then(|i| i.as_str()) == Some(v.as_str()))
+                    })
+                    .and_then(|x| x.get("oi_cache"))
+                    .and_then(|c| c.as_str())
+                    .unwrap_or("—")
+                    .to_string(),
             }
         })
         .collect();
