@@ -120,11 +120,17 @@ pub struct VariantOutput {
 
 /// Run the figures of one variant (no optical-image cache).
 pub fn run_variant(v: &PlannedVariant) -> Result<VariantOutput> {
-    run_variant_with(v, None)
+    run_variant_with(v, None, &mut None)
 }
 
-/// Run the figures of one variant, its optical image through `cache`.
-pub fn run_variant_with(v: &PlannedVariant, cache: Option<&OiCache>) -> Result<VariantOutput> {
+/// Run the figures of one variant, its optical image through `cache`;
+/// `used` tells where the optical image came from (set also when a later
+/// stage fails).
+pub fn run_variant_with(
+    v: &PlannedVariant,
+    cache: Option<&OiCache>,
+    used: &mut Option<CacheUse>,
+) -> Result<VariantOutput> {
     let spec = &v.variant.spec;
     // `save "dng"` needs the sensor image; a measurement that needs only the
     // sensor's configuration renders nothing.
@@ -170,6 +176,7 @@ pub fn run_variant_with(v: &PlannedVariant, cache: Option<&OiCache>) -> Result<V
         object_rects = job.object_rects;
         oi = Some(image);
         out.oi_cache = Some(CacheUse { status, hash });
+        used.clone_from(&out.oi_cache);
         out.render_s = t.elapsed().as_secs_f64();
     }
     if let Some(o) = &oi {
@@ -286,7 +293,11 @@ pub fn run_plan(plan: &Plan, opts: &RunOptions, progress: &mut dyn Progress) -> 
             Outcome::Cached
         } else {
             let t = Instant::now();
-            match run_variant_with(v, opts.oi_cache.as_ref()) {
+            let mut used = None;
+            let result = run_variant_with(v, opts.oi_cache.as_ref(), &mut used);
+            rec.oi_cache = used.as_ref().map(|c| c.status.to_string());
+            rec.oi_hash = used.as_ref().map(|c| c.hash.clone());
+            match result {
                 Ok(vo) => {
                     let (figs, render_s) = (&vo.figures, vo.render_s);
                     // Curves and previews first: a variant CSV on disk means its
@@ -323,8 +334,6 @@ pub fn run_plan(plan: &Plan, opts: &RunOptions, progress: &mut dyn Progress) -> 
                     rec.status = "done".into();
                     rec.render_s = Some(render_s);
                     rec.total_s = Some(total_s);
-                    rec.oi_cache = vo.oi_cache.as_ref().map(|c| c.status.to_string());
-                    rec.oi_hash = vo.oi_cache.as_ref().map(|c| c.hash.clone());
                     sum.done += 1;
                     let n = FINISHED_IN_PROCESS.fetch_add(1, Ordering::SeqCst) + 1;
                     if abort_after.is_some_and(|k| n >= k) {
