@@ -152,8 +152,12 @@ impl OiCache {
     }
 
     /// Store `oi` under `key` (atomically), then evict to the size limit.
-    pub fn store(&self, key: &str, oi: &OpticalImage) -> Result<()> {
+    /// An image larger than the whole limit is not written (returns false).
+    pub fn store(&self, key: &str, oi: &OpticalImage) -> Result<bool> {
         let payload = encode("the optical image", oi)?;
+        if (HEADER + payload.len()) as u64 > self.max_bytes {
+            return Ok(false);
+        }
         let mut bytes = Vec::with_capacity(HEADER + payload.len());
         bytes.extend_from_slice(MAGIC);
         bytes.extend_from_slice(&Sha256::digest(&payload));
@@ -161,7 +165,7 @@ impl OiCache {
         bytes.extend_from_slice(&payload);
         crate::diag::write_atomic(&self.file(key), &bytes)?;
         self.evict();
-        Ok(())
+        Ok(true)
     }
 
     /// Remove least recently used `.bin` files until the total fits `max_bytes`.
@@ -259,7 +263,14 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let c = OiCache::new(dir.path(), 1.0);
         let oi = image();
-        c.store("k", &oi).unwrap();
+        assert!(c.store("k", &oi).unwrap());
+        // Larger than the whole limit: not written.
+        let tiny = OiCache {
+            dir: dir.path().join("tiny"),
+            max_bytes: 100,
+        };
+        assert!(!tiny.store("k", &oi).unwrap());
+        assert!(!tiny.file("k").exists());
         let back = c.load("k").expect("stored image loads");
         assert!(same(&oi, &back));
         // Truncated: detected, removed, absent.

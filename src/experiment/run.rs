@@ -163,8 +163,14 @@ pub fn run_variant_with(
             Some((_, Some(o))) => (o, "hit"),
             Some((c, None)) => {
                 let o = crate::render::render(&scene, camera.as_ref(), &job.film, &job.settings)?;
-                if let Err(e) = c.store(&hash, &o) {
-                    eprintln!("warning: optical image not cached: {e}");
+                match c.store(&hash, &o) {
+                    Ok(true) => {}
+                    Ok(false) => eprintln!(
+                        "note: optical image of '{}' not cached: larger than --cache-max-gb {}",
+                        v.variant.id,
+                        c.max_bytes as f64 / 1e9
+                    ),
+                    Err(e) => eprintln!("warning: optical image not cached: {e}"),
                 }
                 (o, "miss")
             }
