@@ -129,7 +129,7 @@ fn bases_merge_and_overrides_win() {
     assert_eq!(s.measures[0].of, ["edge-near", "edge-far"]);
     assert_eq!(
         plan.variants[0].variant.id,
-        "focus-m=0.3,film-distance-mm=0.57624"
+        "focus-m=0.3,film-distance=paper,film-distance-mm=0.57624"
     );
     assert_eq!(
         s.lens.as_ref().unwrap().overrides.get("film-distance-mm"),
