@@ -110,7 +110,7 @@ fn comments_and_layout_do_not_change_ids_or_hashes() {
 #[test]
 fn bases_merge_and_overrides_win() {
     let plan = plan_of("experiments/fig07-lsf-mtf.kdl");
-    assert_eq!(plan.variants.len(), 2);
+    assert_eq!(plan.variants.len(), 4);
     let s = &plan.variants[0].variant.spec;
     // From the base: scene, camera, lens file; from the experiment: spp, additions.
     assert!(
@@ -129,7 +129,7 @@ fn bases_merge_and_overrides_win() {
     assert_eq!(s.measures[0].of, ["edge-near", "edge-far"]);
     assert_eq!(
         plan.variants[0].variant.id,
-        "focus-m=0.3,film-distance-mm=0.57624"
+        "focus-m=0.3,film-distance=paper,film-distance-mm=0.57624"
     );
     assert_eq!(
         s.lens.as_ref().unwrap().overrides.get("film-distance-mm"),

@@ -17,7 +17,7 @@ fn run(dir: &std::path::Path, body: &str) -> (bool, String, std::path::PathBuf) 
     std::fs::write(
         &f,
         format!(
-            "experiment \"san\" {{\n    base \"{root}/experiments/cornell-box.kdl\"\n    add \"mcc\" target=\"mcc\"\n    add \"bunny\" target=\"mesh\" file=\"{root}/scenes/bunny.obj\" position-m=(0.098 0.058 0.0) rotate-deg=(0 3 0) scale=1.445\n    {body}\n    measure \"colorimetry\" spectrum=\"cie-d65\"\n}}\n"
+            "experiment \"san\" {{\n    base \"{root}/experiments/cornell-box.kdl\"\n    add \"mcc\" target=\"mcc\"\n    add \"bunny\" target=\"mesh\" file=\"{root}/scenes/bunny.obj\" position-m=(0 0.058 0.09) rotate-deg=(0 3 0) scale=1.445\n    {body}\n    measure \"colorimetry\" spectrum=\"cie-d65\"\n}}\n"
         ),
     )
     .unwrap();

@@ -117,8 +117,17 @@ impl Case {
         );
     }
     fn text(&self, dir: &Path) -> String {
+        // The scene schema's own cases read the Cornell box (materials="paper");
+        // every other case a scene with nothing near the origin, so added
+        // objects stand free (check refuses intersecting objects) and
+        // `override "LeftWall"` finds an emitting object.
+        let scene = if self.nodes.contains_key("scene") {
+            format!("{ROOT}/scenes/CornellBoxReference/CornellBoxReference.pbrt")
+        } else {
+            dir.join("reach-scene.kdl").to_string_lossy().to_string()
+        };
         let mut s = format!(
-            "experiment \"reach\" {{\n    scene \"{ROOT}/scenes/CornellBoxReference/CornellBoxReference.pbrt\"{}\n",
+            "experiment \"reach\" {{\n    scene \"{scene}\"{}\n",
             self.props("scene")
         );
         for node in [
@@ -343,6 +352,15 @@ fn write_side_files(dir: &Path) {
         .unwrap();
     std::fs::copy(dir.join("capture.png"), dir.join("labels.png")).unwrap();
     std::fs::write(dir.join("names.txt"), "background\nthing\n").unwrap();
+    // the scene of the non-scene cases: one emitting panel 5 m away
+    std::fs::write(
+        dir.join("reach-scene.kdl"),
+        "film width-px=64 height-px=48 pixel-pitch-um=1.4\n\
+         material \"white\" diffuse=\"constant:0.5\"\n\
+         shape \"LeftWall\" type=\"rectangle\" material=\"white\" emission=\"constant:1\" {\n\
+         position-m 0 0 5\n    size-m 1 1\n    normal 0 0 -1\n}\n",
+    )
+    .unwrap();
     // relative mesh files (`scenes/bunny.obj`) resolve from the experiment's directory
     std::os::unix::fs::symlink(Path::new(ROOT).join("scenes"), dir.join("scenes")).unwrap();
     std::os::unix::fs::symlink(Path::new(ROOT).join("lenses"), dir.join("lenses")).unwrap();

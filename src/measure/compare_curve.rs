@@ -58,6 +58,9 @@ pub struct CompareCurveOptions {
     pub crossing_level: Option<f64>,
     /// Unit the reference's abscissa is in, checked against the curve's.
     pub x_unit: Option<String>,
+    /// The reference columns asked for (None: the first two).
+    pub x_column: Option<String>,
+    pub y_column: Option<String>,
     /// The rows kept: (column, value).
     pub reference_filter: Option<(String, f64)>,
     /// Factor applied to the reference ordinate.
@@ -152,7 +155,12 @@ fn find_file(written: &str, base_dir: &Path) -> Option<PathBuf> {
     if w.is_absolute() {
         return w.is_file().then(|| w.to_path_buf());
     }
-    let abs = std::path::absolute(base_dir).ok()?;
+    let dir = if base_dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        base_dir
+    };
+    let abs = std::path::absolute(dir).ok()?;
     abs.ancestors().map(|d| d.join(w)).find(|p| p.is_file())
 }
 
@@ -317,6 +325,8 @@ pub fn from_params(
         x_range,
         crossing_level,
         x_unit,
+        x_column: x_col,
+        y_column: y_col,
         reference_filter: filter,
         reference_y_scale: scale,
     })

@@ -336,6 +336,48 @@ fn curve_spec(measurement: &str, name: &str, c: &crate::measure::Curve) -> PlotS
     }
 }
 
+/// The declared calibration of each variant, as the report states it: the
+/// sensor's `illuminance-scale-factor` (the paper's per-figure mean-illuminance
+/// factors) from the variant's resolved sensor overrides in the manifest;
+/// "none (1)" where it is not set. Empty when no variant declares one.
+fn calibration_lines(manifest: Option<&serde_json::Value>) -> Vec<(String, String)> {
+    let Some(vs) = manifest
+        .and_then(|m| m.get("variants"))
+        .and_then(|v| v.as_array())
+    else {
+        return vec![];
+    };
+    let lines: Vec<(String, Option<f64>)> = vs
+        .iter()
+        .map(|v| {
+            let id = v
+                .get("id")
+                .and_then(|x| x.as_str())
+                .unwrap_or("")
+                .to_string();
+            let k = v
+                .pointer("/spec/sensor/overrides/illuminance-scale-factor")
+                .and_then(|x| x.as_f64());
+            (id, k)
+        })
+        .collect();
+    if lines.iter().all(|l| l.1.is_none()) {
+        return vec![];
+    }
+    lines
+        .into_iter()
+        .map(|(id, k)| {
+            (
+                id,
+                match k {
+                    Some(k) => format!("illuminance-scale-factor = {}", fmt_num(k)),
+                    None => "none (1)".into(),
+                },
+            )
+        })
+        .collect()
+}
+
 /// Render `dir/report.html` from `dir/results.csv`, `manifest.json`, `curves/`, `previews/`.
 pub fn write_report(dir: &Path) -> Result<()> {
     let rows = read_results(&dir.join("results.csv"))?;
@@ -570,6 +612,7 @@ pub fn write_report(dir: &Path) -> Result<()> {
             plots,
         });
     }
+    let calibration = calibration_lines(manifest.as_ref());
     let manifest_kv: Vec<(String, String)> = manifest
         .as_ref()
         .and_then(|m| m.as_object())
@@ -599,6 +642,7 @@ pub fn write_report(dir: &Path) -> Result<()> {
         n_variants => variants.len(),
         n_figures => rows.len(),
         manifest => manifest_kv,
+        calibration => calibration,
         param_names => param_names,
         variants => vrows,
         measurements => mouts,

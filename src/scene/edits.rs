@@ -269,7 +269,7 @@ pub static MCC_SCHEMA: Schema = Schema {
             Kind::Number,
             "0.014 (× scale)",
             "centre-to-centre patch spacing",
-            "0.0155",
+            "0.0135",
         ),
     ],
 };

@@ -95,8 +95,8 @@ pub fn probe(kind: &str, name: &str, opts: &MeasureOptions) -> Option<Value> {
                 let p = r.file.to_string_lossy();
                 text(&p[p.find("lenses/").unwrap_or(0)..])
             }),
-            "x-column" => c.reference.as_ref().and_then(|r| text(&r.x_name)),
-            "y-column" => c.reference.as_ref().and_then(|r| text(&r.y_name)),
+            "x-column" => c.x_column.as_deref().and_then(text),
+            "y-column" => c.y_column.as_deref().and_then(text),
             "reference-filter" => c
                 .reference_filter
                 .as_ref()
