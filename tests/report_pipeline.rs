@@ -466,6 +466,8 @@ fn report_and_index_render_every_plot_and_open_in_chromium() {
         index.contains("report.html\">fig-test</a>") && index.contains("sfr mtf50 = "),
         "{index}"
     );
+    // per-experiment run times and their total (issue 16 item 3)
+    assert!(index.contains("all experiments</td>"), "{index}");
 
     // Headless Chromium: no console errors, every plot drawn with data.
     for page in [d.join("report.html"), root.join("index.html")] {

@@ -762,6 +762,7 @@ struct IndexRow {
 
 /// Render `root/index.html` listing every experiment directory under `root`.
 pub fn write_index(root: &Path) -> Result<()> {
+    let mut total_all = 0.0f64;
     let rd = std::fs::read_dir(root).map_err(|e| Error::io(root, e))?;
     let mut dirs: Vec<PathBuf> = rd
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -799,13 +800,16 @@ pub fn write_index(root: &Path) -> Result<()> {
             (None, None) if has_results => "ok".into(),
             _ => "no results".into(),
         };
+        // The experiment's own run time: the manifest's wall time of its last
+        // run, else the slowest variant's.
         let total = manifest
             .as_ref()
-            .and_then(|m| m.get("total_s"))
+            .and_then(|m| m.get("wall_s").or_else(|| m.get("total_s")))
             .and_then(|s| s.as_f64())
             .or_else(|| {
                 (!rows.is_empty()).then(|| rows.iter().map(|r| r.total_s).fold(0.0, f64::max))
             });
+        total_all += total.unwrap_or(0.0);
         // Rows of the cross-variant stage (`summary` nodes) get their own section.
         let summary_v = crate::experiment::summary::VARIANT;
         let variants: Vec<String> = variant_order(&rows)
@@ -851,7 +855,13 @@ pub fn write_index(root: &Path) -> Result<()> {
             headline,
         });
     }
-    let ctx = minijinja::context! { experiments => exps, version => crate::version(), css => CSS, js => JS };
+    let ctx = minijinja::context! {
+        experiments => exps,
+        total_s => fmt_num(total_all),
+        version => crate::version(),
+        css => CSS,
+        js => JS
+    };
     let html = render("index.html", INDEX, ctx)?;
     crate::diag::write_atomic(&root.join("index.html"), html.as_bytes())
 }
