@@ -189,6 +189,31 @@ pub fn parse_json(path: &Path, source: &str) -> Result<serde_json::Value> {
     serde_json::from_str(source).map_err(|e| json_error(path, source, &e))
 }
 
+/// Find a relative file: in `base_dir`, then in each of its parents in turn
+/// (`exists` says whether a path is there). A directory named relative to the
+/// working directory (empty or relative) is also searched from its absolute
+/// form, whose parents are listed. An absolute `written` is taken as is.
+pub fn find_up(
+    written: &str,
+    base_dir: &Path,
+    exists: impl Fn(&Path) -> bool,
+) -> Option<std::path::PathBuf> {
+    let w = Path::new(written);
+    if w.is_absolute() {
+        return exists(w).then(|| w.to_path_buf());
+    }
+    let found = base_dir.ancestors().map(|d| d.join(w)).find(|p| exists(p));
+    found.or_else(|| {
+        let dir = if base_dir.as_os_str().is_empty() {
+            Path::new(".")
+        } else {
+            base_dir
+        };
+        let abs = std::path::absolute(dir).ok()?;
+        abs.ancestors().map(|d| d.join(w)).find(|p| exists(p))
+    })
+}
+
 /// Write a file atomically: write a sibling temp file, fsync, then rename over `path`.
 /// A reader never sees a half-written file and an interrupted write loses nothing.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {

@@ -218,28 +218,7 @@ pub fn resolve_ref(
     base_dir: &Path,
     loader: super::source::Loader,
 ) -> Option<std::path::PathBuf> {
-    let w = Path::new(written);
-    if w.is_absolute() {
-        return loader.exists(w).then(|| w.to_path_buf());
-    }
-    let found = base_dir
-        .ancestors()
-        .map(|d| d.join(w))
-        .find(|p| loader.exists(p));
-    // A file named relative to the working directory (`camsim check x.kdl`
-    // inside `experiments/`) has an empty or relative directory whose parents
-    // are not listed: look again from its absolute form.
-    found.or_else(|| {
-        let dir = if base_dir.as_os_str().is_empty() {
-            Path::new(".")
-        } else {
-            base_dir
-        };
-        let abs = std::path::absolute(dir).ok()?;
-        abs.ancestors()
-            .map(|d| d.join(w))
-            .find(|p| loader.exists(p))
-    })
+    crate::diag::find_up(written, base_dir, |p| loader.exists(p))
 }
 
 /// Resolve and check a file reference relative to `base_dir` (see [`resolve_ref`]).

@@ -17,8 +17,9 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 use std::time::Instant;
 
-/// The `variant` column of summary rows.
-pub const VARIANT: &str = "summary";
+/// The `variant` column of summary rows (defined with the results files the
+/// report reads, a layer below).
+pub use crate::report::results::SUMMARY_VARIANT as VARIANT;
 
 /// A `summary` node as the plan and the manifest keep it (so `camsim merge`
 /// can recompute it without the experiment file's parse).

@@ -149,21 +149,6 @@ pub static SCHEMA: Schema = Schema {
     ],
 };
 
-/// Find `written` beside `base_dir`, then in each of its parents.
-fn find_file(written: &str, base_dir: &Path) -> Option<PathBuf> {
-    let w = Path::new(written);
-    if w.is_absolute() {
-        return w.is_file().then(|| w.to_path_buf());
-    }
-    let dir = if base_dir.as_os_str().is_empty() {
-        Path::new(".")
-    } else {
-        base_dir
-    };
-    let abs = std::path::absolute(dir).ok()?;
-    abs.ancestors().map(|d| d.join(w)).find(|p| p.is_file())
-}
-
 /// Read `x_col`/`y_col` (default: the first two columns) of a CSV with `#`
 /// comment lines and a header, keeping rows where `filter` holds.
 pub fn read_reference(
@@ -298,7 +283,7 @@ pub fn from_params(
     let reference = match super::shared_params::nonempty(d, "reference-file")? {
         None => None,
         Some(w) => {
-            let p = find_file(&w, base_dir).ok_or_else(|| {
+            let p = crate::diag::find_up(&w, base_dir, Path::is_file).ok_or_else(|| {
                 ParamError::value("reference-file", format!("reference file '{w}' not found"))
                     .with_help(format!(
                         "relative paths are looked up in {} and then in each parent directory",

@@ -391,7 +391,7 @@ pub fn write_report(dir: &Path) -> Result<()> {
                 .unwrap_or_default()
         });
     // Rows of the cross-variant stage (`summary` nodes) get their own section.
-    let summary_v = crate::experiment::summary::VARIANT;
+    let summary_v = super::results::SUMMARY_VARIANT;
     let variants: Vec<String> = variant_order(&rows)
         .into_iter()
         .filter(|v| v != summary_v)
@@ -711,7 +711,7 @@ fn summary_out(
     let mut plots = vec![];
     let p = dir
         .join("curves")
-        .join(crate::experiment::summary::VARIANT)
+        .join(super::results::SUMMARY_VARIANT)
         .join(format!("{name}.csv"));
     if p.exists() {
         let mut by: Vec<(String, PlotSpec, Vec<Series>)> = vec![];
@@ -811,7 +811,7 @@ pub fn write_index(root: &Path) -> Result<()> {
             });
         total_all += total.unwrap_or(0.0);
         // Rows of the cross-variant stage (`summary` nodes) get their own section.
-        let summary_v = crate::experiment::summary::VARIANT;
+        let summary_v = super::results::SUMMARY_VARIANT;
         let variants: Vec<String> = variant_order(&rows)
             .into_iter()
             .filter(|v| v != summary_v)

@@ -114,6 +114,9 @@ pub fn parse_results(text: &str, origin: &str) -> Result<Vec<ResultRow>> {
     Ok(rows)
 }
 
+/// The `variant` column of the rows written by the cross-variant `summary` stage.
+pub const SUMMARY_VARIANT: &str = "summary";
+
 pub fn read_results(path: &Path) -> Result<Vec<ResultRow>> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
     parse_results(&text, &path.display().to_string())

@@ -95,3 +95,49 @@ pub fn chromium_dom(page: &std::path::Path) -> Option<String> {
     );
     Some(dom)
 }
+
+/// dcraw (an independent raw reader) opens the DNG at `dng` with this size,
+/// CFA pattern (as dcraw prints it, e.g. "GR/BG") and black/white level.
+/// Without dcraw: panics when the env var CI is set, else prints a note and
+/// returns false (nothing checked).
+pub fn dcraw_reads(
+    dng: &std::path::Path,
+    size: (u32, u32),
+    pattern: &str,
+    black_white: (u32, u32),
+) -> bool {
+    use std::process::Command;
+    if Command::new("dcraw").output().is_err() {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "dcraw must be installed in CI (.ci/run installs the Debian package 'dcraw')"
+        );
+        eprintln!("note: dcraw not installed; skipping the external DNG check (CI would fail)");
+        return false;
+    }
+    let id = Command::new("dcraw")
+        .arg("-i")
+        .arg("-v")
+        .arg(dng)
+        .output()
+        .unwrap();
+    let s = String::from_utf8_lossy(&id.stdout);
+    assert!(id.status.success(), "dcraw -i {}: {s}", dng.display());
+    let got = s
+        .lines()
+        .find(|l| l.starts_with("Image size:"))
+        .map(|l| l.split_whitespace().collect::<Vec<_>>().join(" "));
+    let want = format!("Image size: {} x {}", size.0, size.1);
+    assert_eq!(got.as_deref(), Some(want.as_str()), "{s}");
+    assert!(s.contains(&format!("Filter pattern: {pattern}")), "{s}");
+    let dec = Command::new("dcraw")
+        .args(["-v", "-d", "-c"])
+        .arg(dng)
+        .output()
+        .unwrap();
+    let log = String::from_utf8_lossy(&dec.stderr);
+    assert!(dec.status.success(), "{log}");
+    let levels = format!("darkness {}, saturation {}", black_white.0, black_white.1);
+    assert!(log.contains(&levels), "{levels}: {log}");
+    true
+}
