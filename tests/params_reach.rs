@@ -135,7 +135,12 @@ impl Case {
             "summary",
         ] {
             if let Some(p) = self.nodes.get(node) {
-                s.push_str(&format!("    {node}{}\n", fmt_props(p)));
+                s.push_str(&format!("    {node}{}", fmt_props(p)));
+                // `target` is a child of `render`
+                if let (Some(t), "render") = (self.nodes.get("target"), node) {
+                    s.push_str(&format!(" {{\n        target{}\n    }}", fmt_props(t)));
+                }
+                s.push('\n');
             }
         }
         s.push_str(&format!(
@@ -183,8 +188,25 @@ fn setup(schema: &Schema, p: &ParamSpec, c: &mut Case) -> &'static str {
         return "camera";
     }
     if node == "render" {
+        // error-driven sampling: a target needs a budget and a budget a
+        // target, both a measurement whose figures the render changes
+        match p.name {
+            "target-stderr" => c.set("render", "max-spp", "64"),
+            "max-s" | "max-spp" => c.set("render", "target-stderr", "\"1%\""),
+            _ => {}
+        }
+        if matches!(p.name, "target-stderr" | "max-s" | "max-spp") {
+            c.replace("measure", vec![("", "\"ri\"")]);
+        }
         c.set("render", p.name, ex);
         return "render";
+    }
+    if node.starts_with("target ") {
+        c.replace("measure", vec![("", "\"ri\"")]);
+        c.set("render", "max-spp", "64");
+        c.replace("target", vec![("", "\"ri\""), ("stderr", "0.5")]);
+        c.set("target", p.name, ex);
+        return "target";
     }
     if node == "sensor" {
         c.set("sensor", p.name, ex);
@@ -467,6 +489,21 @@ fn probe(
                     Value::Number(r.grid.start_nm + r.grid.step_nm * (r.grid.count as f64 - 1.0)),
                     Value::Number(r.grid.step_nm),
                 ])),
+                // error-driven sampling reads the spec's render settings (run.rs)
+                "target-stderr" => spec.render.target_stderr.and_then(|t| text(&t.to_string())),
+                "max-s" => spec.render.max_s.and_then(num),
+                "max-spp" => spec.render.max_spp.and_then(|n| num(n as f64)),
+                _ => None,
+            }
+        }
+        n if n.starts_with("target ") => {
+            let t = spec.render.targets.first().ok_or("no target")?;
+            match p.name {
+                "stderr" => match t.stderr {
+                    camsim::experiment::spec::StderrTarget::Absolute(a) => num(a),
+                    r => text(&r.to_string()),
+                },
+                "quantity" => t.quantity.as_deref().and_then(text),
                 _ => None,
             }
         }

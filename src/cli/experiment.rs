@@ -41,6 +41,12 @@ pub struct RunArgs {
     /// same experiments; the cap is part of each variant's input hash).
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     pub max_spp: Option<u64>,
+    /// Quality preset: `quick` (the default: each experiment's `render` node)
+    /// or a preset the experiments define with `quality "NAME" …`, e.g.
+    /// `paper` (publication-quality error bars; each experiment states its
+    /// targets). An experiment without the preset runs at its own settings.
+    #[arg(long, value_name = "NAME")]
+    pub quality: Option<String>,
     /// Run shard i of n (1-based), e.g. --shard 2/8.
     #[arg(long)]
     pub shard: Option<String>,
@@ -184,10 +190,18 @@ impl Progress for Bar {
                 figures,
                 total_s,
                 oi_cache,
-            } => match oi_cache {
-                Some(c) => format!("ok ({figures} figures, {total_s:.3} s, oi cache {c})"),
-                None => format!("ok ({figures} figures, {total_s:.3} s)"),
-            },
+                sampling,
+            } => {
+                let mut s = format!("ok ({figures} figures, {total_s:.3} s");
+                if let Some(c) = oi_cache {
+                    s.push_str(&format!(", oi cache {c}"));
+                }
+                if let Some(x) = sampling {
+                    s.push_str(&format!(", {x}"));
+                }
+                s.push(')');
+                s
+            }
             Outcome::Cached => "cached".into(),
             Outcome::Failed(e) => format!("FAILED: {e}"),
         };
@@ -242,6 +256,7 @@ pub fn run(a: RunArgs) -> Result<i32> {
         threads,
         seed: a.seed,
         max_spp: a.max_spp,
+        quality: a.quality.clone().filter(|q| q != "quick"),
         shard,
         interrupted: interrupted.clone(),
         oi_cache: (!a.no_cache)

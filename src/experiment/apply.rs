@@ -4,7 +4,8 @@
 //! `sensor.exposure-s` or `object.edge-near.position-m`.
 //!
 //! Paths:
-//! - `render.spp | render.max-bounces | render.seed | render.wavelength-nm`
+//! - `render.spp | render.max-bounces | render.seed | render.wavelength-nm |
+//!   render.target-stderr | render.max-s | render.max-spp`
 //! - `camera.position-m | camera.look-at-m | camera.up`
 //! - `scene.file`, `lens.file`, `sensor.file` (a file reference)
 //! - `lens.<name>`, `sensor.<name>` (an inline override)
@@ -119,6 +120,39 @@ pub fn as_int(v: &Value, what: &str, min: u64, max: u64) -> R<u64> {
         )));
     }
     Ok(x as u64)
+}
+
+/// A standard-error target: a positive number (absolute, in each figure's
+/// own unit) or a percentage string `"1%"` (relative to |value|).
+pub fn as_stderr_target(v: &Value, what: &str) -> R<super::spec::StderrTarget> {
+    use super::spec::StderrTarget;
+    let help = || {
+        format!(
+            "write {what}=\"1%\" (relative: stderr ≤ 1 % of |value|) or {what}=0.5 (absolute, in each figure's own unit)"
+        )
+    };
+    match v {
+        Value::Number(_) => Ok(StderrTarget::Absolute(as_positive(v, what)?)),
+        Value::String(s) => {
+            let pct = s
+                .trim()
+                .strip_suffix('%')
+                .and_then(|p| p.trim().parse::<f64>().ok())
+                .filter(|p| p.is_finite() && *p > 0.0 && *p < 1000.0);
+            match pct {
+                Some(p) => Ok(StderrTarget::Relative(p / 100.0)),
+                None => Err(ApplyError::new(format!(
+                    "'{what}': expected a positive number or a percentage like \"1%\", found \"{s}\""
+                ))
+                .help(help())),
+            }
+        }
+        o => Err(ApplyError::new(format!(
+            "'{what}': expected a positive number or a percentage like \"1%\", found {}",
+            describe(o)
+        ))
+        .help(help())),
+    }
 }
 
 pub fn as_str<'a>(v: &'a Value, what: &str) -> R<&'a str> {
@@ -296,6 +330,11 @@ pub fn apply(
             "max-bounces" => spec.render.max_bounces = as_int(v, "max-bounces", 0, 1000)? as u32,
             "seed" => spec.render.seed = as_int(v, "seed", 0, 1u64 << 53)?,
             "wavelength-nm" => spec.render.wavelength = as_grid(v, "wavelength-nm")?,
+            "target-stderr" => {
+                spec.render.target_stderr = Some(as_stderr_target(v, "target-stderr")?)
+            }
+            "max-s" => spec.render.max_s = Some(as_positive(v, "max-s")?),
+            "max-spp" => spec.render.max_spp = Some(as_int(v, "max-spp", 1, 1_000_000_000)?),
             k => {
                 return Err(unknown_key(
                     k,

@@ -66,7 +66,82 @@ pub fn check_stages(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError)>
         crate::scene::edits::check_override(&o.params, dir)
             .map_err(|e| located(e, &o.spans, o.span))?;
     }
+    check_sampling(spec)?;
     check_objects_stand_free(spec)
+}
+
+/// Error-driven sampling's settings: a budget, targets naming measurements
+/// whose figures the render changes, a sample budget above the first round.
+fn check_sampling(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError)> {
+    let r = &spec.render;
+    if !r.error_driven() {
+        if r.max_s.is_some() || r.max_spp.is_some() {
+            return Err((
+                r.span,
+                ApplyError::new("max-s and max-spp are budgets of error-driven sampling, which needs a target")
+                    .help("add target-stderr=\"1%\" (or a `target \"MEASUREMENT\" stderr=…` child), or remove the budget"),
+            ));
+        }
+        return Ok(());
+    }
+    if r.max_s.is_none() && r.max_spp.is_none() {
+        return Err((
+            r.span,
+            ApplyError::new("a standard-error target needs a budget: max-s=… (seconds) or max-spp=… (samples per pixel)")
+                .help("e.g. render spp=16 target-stderr=\"1%\" max-spp=1024 max-s=120"),
+        ));
+    }
+    if let Some(m) = r.max_spp
+        && m < r.spp
+    {
+        return Err((
+            r.span,
+            ApplyError::new(format!(
+                "max-spp = {m} is below the first round's spp = {}",
+                r.spp
+            )),
+        ));
+    }
+    for t in &r.targets {
+        if !spec.measures.iter().any(|m| m.name == t.measurement) {
+            let names: Vec<&str> = spec.measures.iter().map(|m| m.name.as_str()).collect();
+            return Err((
+                t.span,
+                ApplyError::new(format!(
+                    "target \"{}\": no measurement of that name; the experiment's: {}",
+                    t.measurement,
+                    names.join(", ")
+                ))
+                .help(
+                    crate::diag::did_you_mean(&t.measurement, names.iter().copied())
+                        .map(|s| format!("did you mean '{s}'?"))
+                        .unwrap_or_else(|| "name a measurement of this experiment".into()),
+                ),
+            ));
+        }
+        if !super::sampling::depends_on_render(spec, &t.measurement) {
+            return Err((
+                t.span,
+                ApplyError::new(format!(
+                    "target \"{}\": its figures do not depend on the render (more samples cannot lower their standard error)",
+                    t.measurement
+                )),
+            ));
+        }
+    }
+    if !spec
+        .measures
+        .iter()
+        .any(|m| super::sampling::depends_on_render(spec, &m.name))
+    {
+        return Err((
+            r.span,
+            ApplyError::new(
+                "target-stderr: no measurement of this experiment depends on the render",
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// The scene with its edits, built as `run` builds it: no two objects may

@@ -73,6 +73,48 @@ pub static RENDER_SCHEMA: Schema = Schema {
             "spectral bands (start stop step)",
             "(410 690 20)",
         ),
+        ParamSpec::new(
+            "target-stderr",
+            Kind::NumberOr(&["\"N%\""]),
+            "none",
+            "error-driven sampling: render in rounds (the first of `spp` samples) until every figure's standard error is at most this: a number in each figure's own unit, or \"N%\" of its magnitude; needs max-s or max-spp. `target \"MEASUREMENT\" [quantity=…] stderr=…` children set one measurement's (or figure's) target",
+            "\"1%\"",
+        ),
+        ParamSpec::new(
+            "max-s",
+            Kind::Number,
+            "none",
+            "error-driven sampling's wall-time budget (render and measurements of every round); a run it stops is flagged \"time budget\" and depends on the machine's speed",
+            "120",
+        ),
+        ParamSpec::new(
+            "max-spp",
+            Kind::Integer,
+            "none",
+            "error-driven sampling's sample budget per pixel (all rounds; deterministic)",
+            "4096",
+        ),
+    ],
+};
+
+/// `render { target "MEASUREMENT" … }`.
+pub static TARGET_SCHEMA: Schema = Schema {
+    node: "target \"MEASUREMENT\" (child of render)",
+    params: &[
+        ParamSpec::new(
+            "stderr",
+            Kind::NumberOr(&["\"N%\""]),
+            "",
+            "the largest standard error of the measurement's figures: a number in each figure's own unit, or \"N%\" of its magnitude (required)",
+            "0.5",
+        ),
+        ParamSpec::new(
+            "quantity",
+            Kind::Text,
+            "all",
+            "only this figure of the measurement: its quantity's exact name or last `/` part",
+            "\"mtf50\"",
+        ),
     ],
 };
 
@@ -119,6 +161,7 @@ pub fn schemas() -> Vec<&'static Schema> {
         &crate::scene::camera_params::LENS_FILE_SCHEMA,
         &crate::scene::camera_params::LENS_MODEL_SCHEMA,
         &RENDER_SCHEMA,
+        &TARGET_SCHEMA,
         &crate::sensor::SCHEMA,
     ];
     v.extend(

@@ -10,6 +10,7 @@
 //! - [`measured`]: captured images (`measured` nodes), `compare`, `convergence`
 //! - [`stages`]: scene → camera → render → sensor → measure (one function each)
 //! - [`run`]: the runner (resume, shards, interruption)
+//! - [`sampling`]: error-driven sampling (rounds until every figure meets its target)
 //! - [`results`]: CSV, manifest, merge
 //! - [`summary`](mod@summary): the cross-variant stage (`summary` nodes) after the whole plan
 //! - [`language`]: every node's properties (schemas), the reference tables
@@ -27,6 +28,7 @@ pub mod parse;
 pub mod plan;
 pub mod results;
 pub mod run;
+pub mod sampling;
 pub mod source;
 pub mod spec;
 pub mod stages;

@@ -37,16 +37,27 @@ pub struct Plan {
     /// The experiment's `summary` nodes, run after every variant has results.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub summaries: Vec<super::summary::SummaryRecord>,
+    /// The quality asked for (`--quality NAME`) and whether the experiment
+    /// defines it: `NAME`, or `NAME (not defined: the render node's settings)`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub quality: Option<String>,
 }
 
 /// Run-wide replacements applied to every variant before hashing (`camsim run
-/// --seed S --max-spp N`): they change the resolved spec, so the input hash.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+/// --seed S --max-spp N --quality Q`): they change the resolved spec, so the
+/// input hash.
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct PlanOverrides {
     /// Replaces `render.seed`.
     pub seed: Option<u64>,
-    /// Caps `render.spp` (a quicker run of the same experiment, e.g. the test baselines).
+    /// Caps `render.spp` and the sample budget `render.max-spp` of
+    /// error-driven sampling (a quicker run of the same experiment, e.g. the
+    /// test baselines).
     pub max_spp: Option<u64>,
+    /// `--quality NAME`: the experiment's `quality "NAME"` render settings
+    /// replace its `render` node's (before sweeps). An experiment without
+    /// that preset runs at its own settings ([`Plan::quality`] says so).
+    pub quality: Option<String>,
 }
 
 /// Expand and check every variant. `seed` replaces `render.seed` everywhere.
@@ -62,7 +73,8 @@ pub fn plan(parsed: &Parsed, seed: Option<u64>) -> Result<Plan, Located> {
 
 /// [`plan`] with run-wide overrides.
 pub fn plan_with(parsed: &Parsed, o: PlanOverrides) -> Result<Plan, Located> {
-    let mut variants = sweep::expand(&parsed.spec, &parsed.sweep, parsed.loader)
+    let (base, quality) = with_quality(parsed, o.quality.as_deref())?;
+    let mut variants = sweep::expand(&base, &parsed.sweep, parsed.loader)
         .map_err(|(s, e)| parsed.sources.error(s, e.message).with_help_opt(e.help))?;
     let mut out = Vec::with_capacity(variants.len());
     let mut file_digests = std::collections::BTreeMap::new();
@@ -72,7 +84,11 @@ pub fn plan_with(parsed: &Parsed, o: PlanOverrides) -> Result<Plan, Located> {
             v.spec.render.seed = s;
         }
         if let Some(n) = o.max_spp {
-            v.spec.render.spp = v.spec.render.spp.min(n.max(1));
+            let n = n.max(1);
+            v.spec.render.spp = v.spec.render.spp.min(n);
+            if v.spec.render.error_driven() {
+                v.spec.render.max_spp = Some(v.spec.render.max_spp.map_or(n, |m| m.min(n)));
+            }
         }
         if !parsed.sweep.items.is_empty() {
             validate_hooks(&v.spec).map_err(|(s, e)| {
@@ -97,7 +113,35 @@ pub fn plan_with(parsed: &Parsed, o: PlanOverrides) -> Result<Plan, Located> {
             .iter()
             .map(super::summary::SummaryRecord::from_node)
             .collect(),
+        quality,
     })
+}
+
+/// The experiment's spec with the `quality "NAME"` preset applied, and the
+/// plan's quality line.
+fn with_quality(
+    parsed: &Parsed,
+    quality: Option<&str>,
+) -> Result<(super::spec::ResolvedExperiment, Option<String>), Located> {
+    let mut spec = parsed.spec.clone();
+    let Some(q) = quality else {
+        return Ok((spec, None));
+    };
+    let Some(preset) = parsed.spec.qualities.iter().find(|p| p.name == q).cloned() else {
+        return Ok((
+            spec,
+            Some(format!("{q} (not defined: the render node's settings)")),
+        ));
+    };
+    for (k, v) in &preset.params.0 {
+        super::apply::apply(&mut spec, &format!("render.{k}"), v, parsed.loader).map_err(|e| {
+            parsed
+                .sources
+                .error(preset.spans.value_at(k, preset.span), e.message)
+                .with_help_opt(e.help)
+        })?;
+    }
+    Ok((spec, Some(q.to_string())))
 }
 
 /// Hash of everything a variant's results depend on: camsim's version, the

@@ -117,6 +117,10 @@ pub struct VariantRecord {
     /// The optical image's cache key (hex SHA-256 of everything the render reads).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub oi_hash: Option<String>,
+    /// Error-driven sampling's record: spp reached, time, why it stopped and
+    /// each targeted figure's final standard error against its target.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sampling: Option<super::sampling::SamplingRecord>,
     /// The resolved spec of the variant.
     pub spec: serde_json::Value,
 }
@@ -132,6 +136,9 @@ pub struct Manifest {
     /// `[i, n]` for a shard run.
     pub shard: Option<[usize; 2]>,
     pub axes: Vec<String>,
+    /// `--quality NAME` of the run (absent: the render nodes' own settings).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub quality: Option<String>,
     pub wall_s: f64,
     /// True when every variant of the plan has results.
     pub complete: bool,
@@ -156,6 +163,7 @@ impl Manifest {
             threads,
             shard: shard.map(|(i, n)| [i, n]),
             axes: plan.axes.clone(),
+            quality: plan.quality.clone(),
             wall_s: 0.0,
             complete: false,
             variants: plan
@@ -173,6 +181,7 @@ impl Manifest {
                     total_s: None,
                     oi_cache: None,
                     oi_hash: None,
+                    sampling: None,
                     spec: serde_json::to_value(&v.variant.spec).unwrap_or_default(),
                 })
                 .collect(),

@@ -33,6 +33,8 @@ pub struct RunOptions {
     pub seed: Option<u64>,
     /// Caps every variant's `render.spp` (`--max-spp`).
     pub max_spp: Option<u64>,
+    /// `--quality NAME`: the experiments' `quality "NAME"` presets.
+    pub quality: Option<String>,
     /// (i, n), 1-based i.
     pub shard: Option<(usize, usize)>,
     /// Set by a Ctrl-C handler: stop after the variant in flight.
@@ -49,6 +51,9 @@ pub enum Outcome {
         total_s: f64,
         /// `hit`, `miss` or `off` when the variant has an optical image.
         oi_cache: Option<&'static str>,
+        /// Error-driven sampling: spp reached and why it stopped, e.g.
+        /// `spp 512, target met` or `spp 4096, spp-budget: budget reached`.
+        sampling: Option<String>,
     },
     Cached,
     Failed(String),
@@ -116,6 +121,8 @@ pub struct VariantOutput {
     pub previews: Vec<(String, Vec<u8>, String)>,
     /// Where the optical image came from (None: the variant renders none).
     pub oi_cache: Option<CacheUse>,
+    /// What error-driven sampling did (None: a fixed sample count).
+    pub sampling: Option<super::sampling::SamplingRecord>,
 }
 
 /// Run the figures of one variant (no optical-image cache).
@@ -152,38 +159,133 @@ pub fn run_variant_with(
     let mut oi = None;
     let mut si = None;
     let mut object_rects = std::collections::BTreeMap::new();
+    let results;
     if need.optical_image {
         let scene = stages::build_scene(spec)?;
         let camera = stages::build_camera(spec, &scene)?;
         let t = Instant::now();
         let job = stages::render_job(spec, &scene, camera.as_ref())?;
         let model = stages::camera_model(spec, &scene)?;
-        let hash = oi_cache::key(&scene, &model, &job.film, &job.settings)?;
-        let (image, status) = match cache.map(|c| (c, c.load(&hash))) {
-            Some((_, Some(o))) => (o, "hit"),
-            Some((c, None)) => {
-                let o = crate::render::render(&scene, camera.as_ref(), &job.film, &job.settings)?;
-                match c.store(&hash, &o) {
-                    Ok(true) => {}
-                    Ok(false) => eprintln!(
-                        "note: optical image of '{}' not cached: larger than --cache-max-gb {}",
-                        v.variant.id,
-                        c.max_bytes as f64 / 1e9
-                    ),
-                    Err(e) => eprintln!("warning: optical image not cached: {e}"),
+        // One round's optical image, through the cache (each round is keyed
+        // by its own settings: spp and seed).
+        let render_round = |settings: &crate::render::RenderSettings| -> Result<(
+            crate::optical_image::OpticalImage,
+            &'static str,
+            String,
+        )> {
+            let hash = oi_cache::key(&scene, &model, &job.film, settings)?;
+            Ok(match cache.map(|c| (c, c.load(&hash))) {
+                Some((_, Some(o))) => (o, "hit", hash),
+                Some((c, None)) => {
+                    let o = crate::render::render(&scene, camera.as_ref(), &job.film, settings)?;
+                    match c.store(&hash, &o) {
+                        Ok(true) => {}
+                        Ok(false) => eprintln!(
+                            "note: optical image of '{}' not cached: larger than --cache-max-gb {}",
+                            v.variant.id,
+                            c.max_bytes as f64 / 1e9
+                        ),
+                        Err(e) => eprintln!("warning: optical image not cached: {e}"),
+                    }
+                    (o, "miss", hash)
                 }
-                (o, "miss")
-            }
-            None => (
-                crate::render::render(&scene, camera.as_ref(), &job.film, &job.settings)?,
-                "off",
-            ),
+                None => (
+                    crate::render::render(&scene, camera.as_ref(), &job.film, settings)?,
+                    "off",
+                    hash,
+                ),
+            })
         };
-        object_rects = job.object_rects;
-        oi = Some(image);
+        let (mut image, mut status, hash) = render_round(&job.settings)?;
+        object_rects = job.object_rects.clone();
+        out.oi_cache = Some(CacheUse {
+            status,
+            hash: hash.clone(),
+        });
+        used.clone_from(&out.oi_cache);
+        let mut render_s = t.elapsed().as_secs_f64();
+        // Error-driven sampling: more rounds until every figure meets its target.
+        let r = &spec.render;
+        let targeted = |name: &str| super::sampling::depends_on_render(spec, name);
+        let mut round = 0u32;
+        let mut history: Vec<(u64, f64)> = vec![];
+        loop {
+            let s = if need.sensor_image {
+                Some(stages::simulate_sensor(spec, &image)?)
+            } else {
+                None
+            };
+            let res = super::measured::measure_all(spec, Some(&image), s.as_ref(), &object_rects)?;
+            si = s;
+            if !r.error_driven() {
+                results = res;
+                break;
+            }
+            let figs: Vec<Figure> = res.iter().flat_map(|m| m.figures.iter().cloned()).collect();
+            let recs = super::sampling::assess(r, &figs, targeted);
+            let n = image.spp as u64;
+            let worst = super::sampling::worst_ratio(&recs);
+            history.push((n, worst));
+            let wall = t.elapsed().as_secs_f64();
+            let k = history.len();
+            let stop = if recs.iter().all(|f| f.met) {
+                Some(super::sampling::Stop::Target)
+            } else if r.max_spp.is_some_and(|m| n >= m) {
+                Some(super::sampling::Stop::SppBudget)
+            } else if k >= 3
+                && super::sampling::stalled_round(history[k - 3], history[k - 2])
+                && super::sampling::stalled_round(history[k - 2], history[k - 1])
+            {
+                Some(super::sampling::Stop::Stalled)
+            } else {
+                let next = super::sampling::next_total(n, worst, r.max_spp);
+                // Time of the next round: its samples at this run's render
+                // rate, plus one more sensor and measurement pass.
+                let per_sample = render_s / n as f64;
+                let measure_s = (wall - render_s) / k as f64;
+                let projected = wall + per_sample * (next - n) as f64 + measure_s;
+                if r.max_s.is_some_and(|m| projected > m) {
+                    Some(super::sampling::Stop::TimeBudget)
+                } else {
+                    round += 1;
+                    let settings = crate::render::RenderSettings {
+                        spp: u32::try_from(next - n)
+                            .map_err(|_| Error::invalid("render spp is too large"))?,
+                        seed: super::sampling::round_seed(r.seed, round),
+                        ..job.settings.clone()
+                    };
+                    let t1 = Instant::now();
+                    let (more, st, _) = render_round(&settings)?;
+                    render_s += t1.elapsed().as_secs_f64();
+                    image.combine(&more).map_err(Error::invalid)?;
+                    if st == "miss" || status == "miss" {
+                        status = "miss";
+                    } else if st == "off" {
+                        status = "off";
+                    }
+                    None
+                }
+            };
+            if let Some(stop) = stop {
+                out.sampling = Some(super::sampling::SamplingRecord {
+                    spp: n,
+                    rounds: round + 1,
+                    render_s,
+                    wall_s: t.elapsed().as_secs_f64(),
+                    stopped: stop,
+                    budget_reached: stop.budget_reached(),
+                    figures: recs,
+                });
+                results = res;
+                break;
+            }
+        }
         out.oi_cache = Some(CacheUse { status, hash });
         used.clone_from(&out.oi_cache);
-        out.render_s = t.elapsed().as_secs_f64();
+        out.render_s = render_s;
+        oi = Some(image);
+    } else {
+        results = super::measured::measure_all(spec, None, None, &object_rects)?;
     }
     if let Some(o) = &oi {
         let tmp = tempfile::tempdir().map_err(|e| Error::invalid(format!("temp dir: {e}")))?;
@@ -193,10 +295,7 @@ pub fn run_variant_with(
         out.previews
             .push(("optical-image.png".into(), bytes, String::new()));
     }
-    if need.sensor_image
-        && let Some(o) = &oi
-    {
-        let s = stages::simulate_sensor(spec, o)?;
+    if let Some(s) = &si {
         // Grey-world white balance for the preview only (raw DVs are untouched).
         let nch = s.cfa.channels.len();
         let mut sum = vec![0.0f64; nch];
@@ -213,7 +312,7 @@ pub fn run_variant_with(
         let neutral: Vec<f64> = means.iter().map(|m| (m / top).max(1e-3)).collect();
         out.previews.push((
             "sensor.png".into(),
-            crate::sensor::output::preview_png_bytes(&s, &neutral)?,
+            crate::sensor::output::preview_png_bytes(s, &neutral)?,
             String::new(),
         ));
         if save_dng {
@@ -221,19 +320,17 @@ pub fn run_variant_with(
                 .ok_or_else(|| Error::invalid("save \"dng\" needs a sensor (add a sensor node)"))?;
             out.previews.push((
                 "sensor-raw-mosaic.png".into(),
-                crate::sensor::output::mosaic_png_bytes(&s)?,
+                crate::sensor::output::mosaic_png_bytes(s)?,
                 String::new(),
             ));
             out.previews.push((
                 "sensor.dng".into(),
-                crate::sensor::output::dng_bytes(&s, &cfg)?,
+                crate::sensor::output::dng_bytes(s, &cfg)?,
                 String::new(),
             ));
         }
-        si = Some(s);
     }
     let mut rois = vec![];
-    let results = super::measured::measure_all(spec, oi.as_ref(), si.as_ref(), &object_rects)?;
     for (m, r) in spec.measures.iter().zip(results) {
         for f in &r.figures {
             if !f.value.is_finite() || !f.stderr.is_finite() {
@@ -340,6 +437,7 @@ pub fn run_plan(plan: &Plan, opts: &RunOptions, progress: &mut dyn Progress) -> 
                     rec.status = "done".into();
                     rec.render_s = Some(render_s);
                     rec.total_s = Some(total_s);
+                    rec.sampling = vo.sampling.clone();
                     sum.done += 1;
                     let n = FINISHED_IN_PROCESS.fetch_add(1, Ordering::SeqCst) + 1;
                     if abort_after.is_some_and(|k| n >= k) {
@@ -352,6 +450,13 @@ pub fn run_plan(plan: &Plan, opts: &RunOptions, progress: &mut dyn Progress) -> 
                         figures: figs.len(),
                         total_s,
                         oi_cache: vo.oi_cache.as_ref().map(|c| c.status),
+                        sampling: vo.sampling.as_ref().map(|r| {
+                            if r.budget_reached {
+                                format!("spp {}, {}: budget reached", r.spp, r.stopped.as_str())
+                            } else {
+                                format!("spp {}, target met", r.spp)
+                            }
+                        }),
                     }
                 }
                 Err(e) => {
@@ -433,6 +538,7 @@ pub fn run_parsed(
         super::plan::PlanOverrides {
             seed: opts.seed,
             max_spp: opts.max_spp,
+            quality: opts.quality.clone(),
         },
     )?;
     run_plan(&plan, opts, progress)

@@ -123,6 +123,33 @@ pub struct RenderSettings {
     pub seed: u64,
     /// Wavelength grid `wavelength-nm=(start stop step)`.
     pub wavelength: WavelengthGrid,
+    /// `target-stderr=…`: error-driven sampling. With a target, `spp` is the
+    /// first round and the render goes on in rounds until every figure meets
+    /// its target (or a budget is spent); see [`super::sampling`].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub target_stderr: Option<StderrTarget>,
+    /// Per-measurement (or per-figure) targets: `target "NAME" stderr=…`
+    /// children of `render`; they replace `target_stderr` for those figures.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub targets: Vec<FigureTarget>,
+    /// `max-s=…`: wall-time budget of error-driven sampling (render and
+    /// measurements of all rounds). A run stopped by it is marked and is not
+    /// reproducible (it depends on the machine's speed).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_s: Option<f64>,
+    /// `max-spp=…`: sample budget of error-driven sampling (deterministic).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_spp: Option<u64>,
+    /// Where the `render` node was written (errors about its settings point here).
+    #[serde(skip)]
+    pub span: Span,
+}
+
+impl RenderSettings {
+    /// Does the variant sample until a standard-error target is met?
+    pub fn error_driven(&self) -> bool {
+        self.target_stderr.is_some() || !self.targets.is_empty()
+    }
 }
 
 impl Default for RenderSettings {
@@ -132,8 +159,77 @@ impl Default for RenderSettings {
             max_bounces: 5,
             seed: 0,
             wavelength: WavelengthGrid::default(),
+            target_stderr: None,
+            targets: Vec::new(),
+            max_s: None,
+            max_spp: None,
+            span: Span::default(),
         }
     }
+}
+
+/// A standard-error target: absolute, in each figure's own unit
+/// (`target-stderr=0.5`), or relative to the figure's magnitude
+/// (`target-stderr="1%"`: stderr ≤ 0.01·|value|).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum StderrTarget {
+    Absolute(f64),
+    Relative(f64),
+}
+
+impl StderrTarget {
+    /// The largest standard error that meets the target for a figure of `value`.
+    pub fn allowed(&self, value: f64) -> f64 {
+        match *self {
+            StderrTarget::Absolute(a) => a,
+            StderrTarget::Relative(r) => r * value.abs(),
+        }
+    }
+}
+
+impl std::fmt::Display for StderrTarget {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            StderrTarget::Absolute(a) => write!(f, "{a}"),
+            StderrTarget::Relative(r) => write!(f, "{}%", r * 100.0),
+        }
+    }
+}
+
+/// `render { target "MEASUREMENT" [quantity="Q"] stderr=… }`: the target of
+/// one measurement's figures (all of them, or the quantity `Q`: its exact
+/// name or its last `/` component).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct FigureTarget {
+    pub measurement: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub quantity: Option<String>,
+    pub stderr: StderrTarget,
+    #[serde(skip)]
+    pub span: Span,
+}
+
+impl FigureTarget {
+    /// Does this target apply to figure (`measurement`, `quantity`)?
+    pub fn applies(&self, measurement: &str, quantity: &str) -> bool {
+        self.measurement == measurement
+            && self
+                .quantity
+                .as_deref()
+                .is_none_or(|q| quantity == q || quantity.rsplit('/').next() == Some(q))
+    }
+}
+
+/// `quality "NAME" spp=… target-stderr=… max-s=…`: render settings that
+/// `camsim run --quality NAME` puts in place of the `render` node's (before
+/// sweeps, so a swept `render.*` value still wins).
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct QualityPreset {
+    pub name: String,
+    pub params: Params,
+    pub span: Span,
+    pub spans: PropSpans,
 }
 
 /// One requested measurement.
@@ -220,6 +316,10 @@ pub struct ResolvedExperiment {
     /// not hashed): a summary is recomputed from the results on every run.
     #[serde(skip)]
     pub summaries: Vec<Measure>,
+    /// `quality "NAME" …` presets (applied by `camsim run --quality NAME`
+    /// before planning; the applied settings are in `render`, so hashed).
+    #[serde(skip)]
+    pub qualities: Vec<QualityPreset>,
 }
 
 impl ResolvedExperiment {
@@ -245,6 +345,7 @@ impl ResolvedExperiment {
             save: Vec::new(),
             tags: BTreeMap::new(),
             summaries: Vec::new(),
+            qualities: Vec::new(),
         }
     }
 

@@ -113,6 +113,8 @@ pub const DIMENSIONLESS_WORDS: &[&str] = &[
     "reflectance",
     "weight",
     "seed",
+    // a standard-error target is in each figure's own unit (or "N%")
+    "stderr",
 ];
 
 /// Does `name` carry a unit (or is it dimensionless by name)?

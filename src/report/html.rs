@@ -116,6 +116,9 @@ struct VariantRow {
 struct Cell {
     value: String,
     stderr: String,
+    /// `budget reached`: error-driven sampling stopped before this figure
+    /// met its target (empty otherwise).
+    flag: String,
 }
 
 #[derive(Serialize)]
@@ -336,6 +339,85 @@ fn curve_spec(measurement: &str, name: &str, c: &crate::measure::Curve) -> PlotS
     }
 }
 
+/// One variant's error-driven sampling, as the report shows it.
+#[derive(Serialize)]
+struct SamplingOut {
+    variant: String,
+    spp: u64,
+    rounds: u32,
+    render_s: String,
+    wall_s: String,
+    stopped: String,
+    budget_reached: bool,
+    met: usize,
+    targeted: usize,
+    /// The figures that did not meet their target.
+    unmet: Vec<crate::experiment::sampling::FigureRecord>,
+    /// The worst figure: `measurement/quantity stderr (target)`.
+    worst: String,
+}
+
+/// Each variant's sampling record from the manifest (empty when no variant
+/// samples to a target).
+fn sampling_out(manifest: Option<&serde_json::Value>) -> Vec<SamplingOut> {
+    let Some(vs) = manifest
+        .and_then(|m| m.get("variants"))
+        .and_then(|v| v.as_array())
+    else {
+        return vec![];
+    };
+    vs.iter()
+        .filter_map(|v| {
+            let id = v.get("id")?.as_str()?.to_string();
+            let r: crate::experiment::sampling::SamplingRecord =
+                serde_json::from_value(v.get("sampling")?.clone()).ok()?;
+            let worst = r
+                .figures
+                .iter()
+                .max_by(|a, b| {
+                    let q = |f: &crate::experiment::sampling::FigureRecord| {
+                        if f.allowed > 0.0 {
+                            f.stderr / f.allowed
+                        } else if f.stderr > 0.0 {
+                            f64::INFINITY
+                        } else {
+                            0.0
+                        }
+                    };
+                    q(a).total_cmp(&q(b))
+                })
+                .map(|f| {
+                    format!(
+                        "{}/{}: ± {} {} (target {})",
+                        f.measurement,
+                        f.quantity,
+                        fmt_se(f.stderr),
+                        f.unit,
+                        f.target
+                    )
+                })
+                .unwrap_or_default();
+            Some(SamplingOut {
+                variant: id,
+                spp: r.spp,
+                rounds: r.rounds,
+                render_s: fmt_num(r.render_s),
+                wall_s: fmt_num(r.wall_s),
+                stopped: if r.budget_reached {
+                    format!("{}: budget reached", r.stopped.as_str())
+                } else {
+                    "target met".into()
+                },
+                budget_reached: r.budget_reached,
+                met: r.figures.iter().filter(|f| f.met).count(),
+                targeted: r.figures.len(),
+                unmet: r.figures.iter().filter(|f| !f.met).cloned().collect(),
+                worst,
+            })
+        })
+        .collect()
+}
+
 /// The declared calibration of each variant, as the report states it: the
 /// sensor's `illuminance-scale-factor` (the paper's per-figure mean-illuminance
 /// factors) from the variant's resolved sensor overrides in the manifest;
@@ -447,6 +529,15 @@ pub fn write_report(dir: &Path) -> Result<()> {
     let mut mouts = vec![];
     let mut souts = vec![];
     let mut pid = 0;
+    let sampling = sampling_out(manifest.as_ref());
+    let unmet: std::collections::BTreeSet<(String, String, String)> = sampling
+        .iter()
+        .flat_map(|s| {
+            s.unmet
+                .iter()
+                .map(|f| (s.variant.clone(), f.measurement.clone(), f.quantity.clone()))
+        })
+        .collect();
     for m in &measurements {
         let mr: Vec<&ResultRow> = rows.iter().filter(|r| &r.measurement == m).collect();
         if mr.iter().all(|r| r.variant == summary_v) {
@@ -468,10 +559,16 @@ pub fn write_report(dir: &Path) -> Result<()> {
                 Some(r) => Cell {
                     value: fmt_num(r.value),
                     stderr: fmt_se(r.stderr),
+                    flag: if unmet.contains(&(v.to_string(), m.clone(), q.to_string())) {
+                        "budget reached".into()
+                    } else {
+                        String::new()
+                    },
                 },
                 None => Cell {
                     value: "—".into(),
                     stderr: String::new(),
+                    flag: String::new(),
                 },
             };
         let qtitle = |q: &(String, String)| {
@@ -643,6 +740,7 @@ pub fn write_report(dir: &Path) -> Result<()> {
         n_figures => rows.len(),
         manifest => manifest_kv,
         calibration => calibration,
+        sampling => sampling,
         param_names => param_names,
         variants => vrows,
         measurements => mouts,
@@ -705,6 +803,7 @@ fn summary_out(
             cells: vec![Cell {
                 value: fmt_num(r.value),
                 stderr: fmt_se(r.stderr),
+                flag: String::new(),
             }],
         })
         .collect();

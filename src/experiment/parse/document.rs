@@ -7,7 +7,6 @@ use crate::experiment::apply;
 use crate::experiment::source::{Span, parse_kdl};
 use crate::experiment::sweep::Sweep;
 use crate::params::{Params, Value};
-use kdl::KdlValue;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -390,27 +389,12 @@ impl P {
                         spec.sensor = Some(s);
                     }
                 }
-                "render" => {
+                "render" => self.parse_render(file, n, &mut spec)?,
+                "quality" => {
                     self.no_children(file, n)?;
-                    for e in self.entries(file, n)? {
-                        let (k, ks) = self.prop(&e, "render")?;
-                        let path = format!("render.{k}");
-                        let known = crate::experiment::language::RENDER_SCHEMA.names();
-                        if !known.contains(&k.as_str()) {
-                            return Err(self.unknown_prop(&k, ks, &known, "render", &e.value));
-                        }
-                        if k == "seed"
-                            && let KdlValue::Integer(i) = e.raw
-                            && (i < 0 || i > u64::MAX as i128)
-                        {
-                            return Err(self.e(
-                                e.vspan,
-                                format!("'seed' = {i} is out of range; expected 0…{}", 1u64 << 53),
-                            ));
-                        }
-                        apply::apply(&mut spec, &path, &e.value, self.loader)
-                            .map_err(|x| self.ae(e.vspan, x))?;
-                    }
+                    let q = self.parse_quality(file, n, &spec)?;
+                    spec.qualities.retain(|p| p.name != q.name);
+                    spec.qualities.push(q);
                 }
                 "measure" => {
                     self.no_children(file, n)?;

@@ -46,6 +46,7 @@ const EXPERIMENT_NODES: &[&str] = &[
     "lens",
     "sensor",
     "render",
+    "quality",
     "sweep",
     "measure",
     "measured",
@@ -133,4 +134,5 @@ fn err_at(map: &SourceMap, span: Span, msg: impl Into<String>) -> Located {
 mod document;
 mod entries;
 mod nodes;
+mod render_node;
 mod sweep_node;
