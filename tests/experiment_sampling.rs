@@ -273,6 +273,11 @@ fn sampling_settings_are_checked_where_they_are_written() {
             "t.kdl:6:9",
         ),
         (
+            "render spp=4\n    quality \"paper\" max-s=10 {\n        target \"mc\" stderr=1\n    }",
+            "quality \"paper\": target \"mc\"",
+            "t.kdl:7:9",
+        ),
+        (
             "render spp=4 target-stder=\"1%\"",
             "did you mean 'target-stderr'",
             "t.kdl:5:",
@@ -297,7 +302,7 @@ fn a_quality_preset_replaces_the_render_settings_and_sweeps_still_win() {
         text(
             "q",
             &s.scene,
-            "render spp=4 max-bounces=1 seed=3\n    quality \"paper\" spp=8 target-stderr=\"50%\" max-spp=64",
+            "render spp=4 max-bounces=1 seed=3\n    quality \"paper\" spp=8 target-stderr=\"50%\" max-spp=64 {\n        target \"mcc\" quantity=\"g_mean\" stderr=\"50%\"\n    }",
             "    sweep {\n        tag.k 1 2\n    }\n",
         ),
     );
@@ -315,6 +320,13 @@ fn a_quality_preset_replaces_the_render_settings_and_sweeps_still_win() {
         assert_eq!(v["spec"]["render"]["spp"], 8);
         assert_eq!(v["spec"]["render"]["max_spp"], 64);
         assert_eq!(v["sampling"]["stopped"], "target", "{v}");
+        // The preset's target child: the 24 green patch means only.
+        let figs = v["sampling"]["figures"].as_array().unwrap();
+        assert_eq!(figs.len(), 24);
+        assert!(
+            figs.iter()
+                .all(|f| f["quantity"].as_str().unwrap().ends_with("/g_mean"))
+        );
     }
     // `--quality quick` is the render node itself: the same plan as no flag.
     let q2 = s.dir.path().join("quick2");

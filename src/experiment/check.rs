@@ -67,6 +67,15 @@ pub fn check_stages(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError)>
             .map_err(|e| located(e, &o.spans, o.span))?;
     }
     check_sampling(spec)?;
+    // Each quality preset, applied as `camsim run --quality NAME` applies it.
+    for q in &spec.qualities {
+        let mut s = spec.clone();
+        q.apply_to(&mut s, super::source::Loader::Disk)?;
+        check_sampling(&s).map_err(|(sp, mut e)| {
+            e.message = format!("quality \"{}\": {}", q.name, e.message);
+            (sp, e)
+        })?;
+    }
     check_objects_stand_free(spec)
 }
 

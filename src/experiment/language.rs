@@ -112,7 +112,7 @@ pub static TARGET_SCHEMA: Schema = Schema {
             "quantity",
             Kind::Text,
             "all",
-            "only this figure of the measurement: its quantity's exact name or last `/` part",
+            "only this figure of the measurement: its quantity's exact name or a trailing `/…` part of it",
             "\"mtf50\"",
         ),
     ],

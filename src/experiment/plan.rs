@@ -133,14 +133,9 @@ fn with_quality(
             Some(format!("{q} (not defined: the render node's settings)")),
         ));
     };
-    for (k, v) in &preset.params.0 {
-        super::apply::apply(&mut spec, &format!("render.{k}"), v, parsed.loader).map_err(|e| {
-            parsed
-                .sources
-                .error(preset.spans.value_at(k, preset.span), e.message)
-                .with_help_opt(e.help)
-        })?;
-    }
+    preset
+        .apply_to(&mut spec, parsed.loader)
+        .map_err(|(sp, e)| parsed.sources.error(sp, e.message).with_help_opt(e.help))?;
     Ok((spec, Some(q.to_string())))
 }
 

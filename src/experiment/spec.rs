@@ -199,7 +199,7 @@ impl std::fmt::Display for StderrTarget {
 
 /// `render { target "MEASUREMENT" [quantity="Q"] stderr=… }`: the target of
 /// one measurement's figures (all of them, or the quantity `Q`: its exact
-/// name or its last `/` component).
+/// name or a trailing `/…` part of it).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct FigureTarget {
     pub measurement: String,
@@ -211,13 +211,17 @@ pub struct FigureTarget {
 }
 
 impl FigureTarget {
-    /// Does this target apply to figure (`measurement`, `quantity`)?
+    /// Does this target apply to figure (`measurement`, `quantity`)? The
+    /// quantity matches its exact name or a trailing `/…` part of it
+    /// (`mtf50` matches `edge-near/mtf50`, `g/r` matches `mcc/patch04/g/r`).
     pub fn applies(&self, measurement: &str, quantity: &str) -> bool {
         self.measurement == measurement
-            && self
-                .quantity
-                .as_deref()
-                .is_none_or(|q| quantity == q || quantity.rsplit('/').next() == Some(q))
+            && self.quantity.as_deref().is_none_or(|q| {
+                quantity == q
+                    || quantity
+                        .strip_suffix(q)
+                        .is_some_and(|head| head.ends_with('/'))
+            })
     }
 }
 
@@ -228,8 +232,34 @@ impl FigureTarget {
 pub struct QualityPreset {
     pub name: String,
     pub params: Params,
+    /// `target` children: they replace the `render` node's target of the
+    /// same measurement and quantity.
+    pub targets: Vec<FigureTarget>,
     pub span: Span,
     pub spans: PropSpans,
+}
+
+impl QualityPreset {
+    /// `spec` with this preset's render settings and targets in place.
+    pub fn apply_to(
+        &self,
+        spec: &mut ResolvedExperiment,
+        loader: super::source::Loader,
+    ) -> Result<(), (Span, super::apply::ApplyError)> {
+        for (k, v) in &self.params.0 {
+            super::apply::apply(spec, &format!("render.{k}"), v, loader)
+                .map_err(|e| (self.spans.value_at(k, self.span), e))?;
+        }
+        for t in &self.targets {
+            spec.render.targets.retain(|o| {
+                (o.measurement.as_str(), o.quantity.as_deref())
+                    != (t.measurement.as_str(), t.quantity.as_deref())
+            });
+            spec.render.targets.push(t.clone());
+        }
+        spec.render.span = self.span;
+        Ok(())
+    }
 }
 
 /// One requested measurement.

@@ -391,7 +391,6 @@ impl P {
                 }
                 "render" => self.parse_render(file, n, &mut spec)?,
                 "quality" => {
-                    self.no_children(file, n)?;
                     let q = self.parse_quality(file, n, &spec)?;
                     spec.qualities.retain(|p| p.name != q.name);
                     spec.qualities.push(q);

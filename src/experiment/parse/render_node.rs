@@ -24,6 +24,24 @@ impl P {
             let (k, ks) = self.prop(&e, "render")?;
             self.render_prop(spec, &k, ks, &e, "render")?;
         }
+        for t in self.parse_targets(file, n, "render")? {
+            spec.render.targets.retain(|o| {
+                (o.measurement.as_str(), o.quantity.as_deref())
+                    != (t.measurement.as_str(), t.quantity.as_deref())
+            });
+            spec.render.targets.push(t);
+        }
+        Ok(())
+    }
+
+    /// The `target` children of a `render` or `quality` node.
+    fn parse_targets(
+        &self,
+        file: usize,
+        n: &KdlNode,
+        node: &str,
+    ) -> Result<Vec<FigureTarget>, Located> {
+        let mut out = vec![];
         if let Some(children) = n.children() {
             for c in children.nodes() {
                 self.no_type(file, c)?;
@@ -32,22 +50,17 @@ impl P {
                     return Err(self
                         .e(
                             cs,
-                            format!("unknown node '{}' inside render", c.name().value()),
+                            format!("unknown node '{}' inside {node}", c.name().value()),
                         )
-                        .with_help(
-                            "render's block holds `target \"MEASUREMENT\" stderr=…` nodes",
-                        ));
+                        .with_help(format!(
+                            "{node}'s block holds `target \"MEASUREMENT\" stderr=…` nodes"
+                        )));
                 }
                 self.no_children(file, c)?;
-                let t = self.parse_target(file, c)?;
-                spec.render.targets.retain(|o| {
-                    (o.measurement.as_str(), o.quantity.as_deref())
-                        != (t.measurement.as_str(), t.quantity.as_deref())
-                });
-                spec.render.targets.push(t);
+                out.push(self.parse_target(file, c)?);
             }
         }
-        Ok(())
+        Ok(out)
     }
 
     /// One `render` property (also a `quality` preset's), checked as it is read.
@@ -145,7 +158,7 @@ impl P {
         })
     }
 
-    /// `quality "NAME" spp=… target-stderr=… …`: the properties are checked
+    /// `quality "NAME" spp=… target-stderr=… … [{ target … }]`: the properties are checked
     /// as `render` properties now (on a scratch copy of `spec`) and kept for
     /// `camsim run --quality NAME`.
     pub(super) fn parse_quality(
@@ -194,9 +207,11 @@ impl P {
                 .e(sp, "quality needs the preset's name")
                 .with_help("write quality \"paper\" spp=256 target-stderr=\"1%\" max-s=300"));
         };
+        let targets = self.parse_targets(file, n, "quality")?;
         Ok(QualityPreset {
             name,
             params,
+            targets,
             span: sp,
             spans,
         })
