@@ -162,8 +162,8 @@ const CASES: &[(&str, &str, &str)] = &[
     ),
     (
         "render-with-block.kdl",
-        "render-with-block.kdl:2:5",
-        "'render' takes no { … } block",
+        "render-with-block.kdl:3:9",
+        "unknown node 'spp' inside render",
     ),
     (
         "scale-negative.kdl",

@@ -46,15 +46,18 @@ impl P {
             for c in children.nodes() {
                 self.no_type(file, c)?;
                 let cs = self.node_span(file, c);
-                if c.name().value() != "target" {
-                    return Err(self
-                        .e(
-                            cs,
-                            format!("unknown node '{}' inside {node}", c.name().value()),
+                let name = c.name().value();
+                if name != "target" {
+                    let help = if RENDER_SCHEMA.get(name).is_some() {
+                        format!(
+                            "write '{name}' as a property on the {node} line, e.g. {node} {name}=…; the block holds only `target \"MEASUREMENT\" stderr=…` nodes"
                         )
-                        .with_help(format!(
-                            "{node}'s block holds `target \"MEASUREMENT\" stderr=…` nodes"
-                        )));
+                    } else {
+                        format!("{node}'s block holds `target \"MEASUREMENT\" stderr=…` nodes")
+                    };
+                    return Err(self
+                        .e(cs, format!("unknown node '{name}' inside {node}"))
+                        .with_help(help));
                 }
                 self.no_children(file, c)?;
                 out.push(self.parse_target(file, c)?);
