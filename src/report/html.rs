@@ -856,6 +856,8 @@ struct IndexRow {
     status_class: &'static str,
     variants: usize,
     total_s: String,
+    /// The run's `--quality` (`quick`: the render nodes' own settings).
+    quality: String,
     headline: Vec<String>,
 }
 
@@ -951,6 +953,12 @@ pub fn write_index(root: &Path) -> Result<()> {
             status,
             variants: variants.len(),
             total_s: total.map(fmt_num).unwrap_or_else(|| "—".into()),
+            quality: manifest
+                .as_ref()
+                .and_then(|m| m.get("quality"))
+                .and_then(|q| q.as_str())
+                .unwrap_or("quick")
+                .to_string(),
             headline,
         });
     }
