@@ -10,8 +10,25 @@ use super::spec::{PropSpans, ResolvedExperiment};
 use crate::params::{ParamError, Params};
 use std::path::Path;
 
+/// Scenes already checked for intersecting objects, by their inputs (the
+/// scene file and materials, additions, removals, overrides): a plan's
+/// variants often share one scene (a sweep over the sensor, the camera or a
+/// light's spectrum), which is then built and checked once.
+#[derive(Default)]
+pub struct CheckMemo {
+    scenes: std::collections::HashMap<String, Result<(), (Span, ApplyError)>>,
+}
+
 /// Build (without rendering) every stage of `spec` from its parameters.
 pub fn check_stages(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError)> {
+    check_stages_with(spec, &mut CheckMemo::default())
+}
+
+/// [`check_stages`], remembering scene checks in `memo` (across a plan's variants).
+pub fn check_stages_with(
+    spec: &ResolvedExperiment,
+    memo: &mut CheckMemo,
+) -> Result<(), (Span, ApplyError)> {
     let located = |e: ParamError, ps: &PropSpans, whole: Span| {
         let spans = if e.on_value { &ps.values } else { &ps.names };
         let span = e
@@ -76,7 +93,22 @@ pub fn check_stages(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyError)>
             (sp, e)
         })?;
     }
-    check_objects_stand_free(spec)
+    // The key holds everything `build_scene` reads but the camera pose (the
+    // intersection check does not look through the camera).
+    let key = serde_json::to_string(&(
+        &spec.scene,
+        &spec.scene_materials,
+        &spec.additions,
+        &spec.removals,
+        &spec.overrides,
+    ))
+    .unwrap_or_default();
+    if let Some(r) = memo.scenes.get(&key) {
+        return r.clone();
+    }
+    let r = check_objects_stand_free(spec);
+    memo.scenes.insert(key, r.clone());
+    r
 }
 
 /// Error-driven sampling's settings: a budget, targets naming measurements

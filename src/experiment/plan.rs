@@ -2,7 +2,7 @@
 //! and input hash. `camsim plan --json` prints it; the same inputs always give
 //! byte-identical JSON (ordered maps, no timestamps).
 
-use super::parse::{Parsed, validate_hooks};
+use super::parse::Parsed;
 use super::sweep::{self, Variant};
 use crate::diag::Located;
 use serde::Serialize;
@@ -78,6 +78,7 @@ pub fn plan_with(parsed: &Parsed, o: PlanOverrides) -> Result<Plan, Located> {
         .map_err(|(s, e)| parsed.sources.error(s, e.message).with_help_opt(e.help))?;
     let mut out = Vec::with_capacity(variants.len());
     let mut file_digests = std::collections::BTreeMap::new();
+    let mut memo = super::check::CheckMemo::default();
     for v in variants.drain(..) {
         let mut v = v;
         if let Some(s) = o.seed {
@@ -91,7 +92,7 @@ pub fn plan_with(parsed: &Parsed, o: PlanOverrides) -> Result<Plan, Located> {
             }
         }
         if !parsed.sweep.items.is_empty() {
-            validate_hooks(&v.spec).map_err(|(s, e)| {
+            super::check::check_stages_with(&v.spec, &mut memo).map_err(|(s, e)| {
                 parsed
                     .sources
                     .error(s, format!("variant '{}': {}", v.id, e.message))
