@@ -262,7 +262,7 @@ mod tests {
             "{}",
             msg[0]
         );
-        assert!(msg[1].contains("non-finite"), "{}", msg[1]);
+        assert!(msg[1].contains("not finite"), "{}", msg[1]);
         // all passing
         let (f, msg) = figures("m", "c", &checks[..1], 1.0);
         assert_eq!(f[0].value, 1.0);
