@@ -19,6 +19,7 @@ pub mod report;
 pub mod scene;
 pub mod sensor;
 pub mod spectrum;
+pub mod stability;
 pub mod summary;
 
 pub use diag::{Error, Result};

@@ -94,6 +94,20 @@ fn report_must_show(experiment: &str) -> &'static [&'static str] {
         ],
         // R, G, B along the achromatic row and the G/R ratios
         "fig09-interreflection" => &["profile: profile/r", "profile: ratio/g/r"],
+        // the pass/fail table: a row per case, its passed and failed counts
+        "stability" => &[
+            "Measurement: stability",
+            "<th>passed (1)</th>",
+            "<th>failed_checks (1)</th>",
+            "case=dynamic-range</td><td>1</td>",
+            "case=grazing</td><td>1</td>",
+            "case=scale</td><td>1</td>",
+            "case=sensor-saturated-dark</td><td>1</td>",
+            "case=rtf-beyond-field</td><td>1</td>",
+            "case=rtf-singular-fit</td><td>1</td>",
+            "case=sfr-noisy</td><td>1</td>",
+            "case=exposure-gain</td><td>1</td>",
+        ],
         _ => &[],
     }
 }

@@ -150,6 +150,10 @@ fn unknown_misspelt_wrong_typed_and_out_of_range_properties_are_named() {
             str_("cap"),
             "unknown property 'input'",
         ),
+        ("stability", "case", str_("grazeing"), "expected one of"),
+        ("stability", "case", n(1.0), "expected a string"),
+        ("stability", "tolerance-scale", n(-1.0), "out of range"),
+        ("stability", "of", str_("sfr"), "unknown property 'of'"),
     ];
     for (kind, name, v, needle) in cases {
         let e = match options(kind, &one(name, v.clone()), root()) {

@@ -333,6 +333,7 @@ fn setup(schema: &Schema, p: &ParamSpec, c: &mut Case) -> &'static str {
             "conversion-gain" if p.name == "reference-variance-dv2" => {
                 c.set("measure", "reference-mean-dv", "320.7")
             }
+            "stability" if p.name != "case" => c.set("measure", "case", "\"scale\""),
             _ => {}
         }
         if p.name == "input" || (kind == "ri" && p.name == "channel") {

@@ -31,6 +31,7 @@ pub const EXPERIMENTS: &[(&str, &str)] = &[
     embed!("fig11-conversion-gain.kdl"),
     embed!("rtf-vs-prescription.kdl"),
     embed!("smoke.kdl"),
+    embed!("stability.kdl"),
     embed!("table1-sensor.kdl"),
 ];
 

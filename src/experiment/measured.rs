@@ -667,6 +667,19 @@ pub fn convergence(m: &Measure, spec: &ResolvedExperiment) -> Result<Measured> {
     Ok(out)
 }
 
+/// `measure "stability"`: one stiff or extreme case ([`crate::stability`]),
+/// which renders and runs the variant's sensor on its own.
+fn stability(m: &Measure, spec: &ResolvedExperiment) -> Result<Measured> {
+    let MeasureOptions::Stability(o) = options_of(m, spec)? else {
+        return Err(Error::invalid(format!(
+            "'{}' is not a stability case",
+            m.name
+        )));
+    };
+    let sensor = stages::sensor_config(spec)?;
+    crate::stability::measure(&m.name, &o, sensor.as_ref(), spec.render.seed)
+}
+
 /// Run every measurement of a variant, in dependency order (compare last),
 /// and return their results in file order. Captured images are read once.
 pub fn measure_all(
@@ -702,6 +715,8 @@ pub fn measure_all(
                 }
             } else if m.kind == "convergence" {
                 convergence(m, spec)?
+            } else if m.kind == "stability" {
+                stability(m, spec)?
             } else if let Some(input) = m.params.str("input").map_err(Error::invalid)? {
                 let c = spec.measured_input(input).ok_or_else(|| {
                     Error::invalid(format!(

@@ -26,6 +26,7 @@ pub mod ri;
 pub mod sensor_calibration;
 pub mod sfr;
 pub mod shared_params;
+pub mod stability;
 pub mod stats;
 
 pub use request::{MeasureOptions, options};

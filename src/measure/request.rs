@@ -20,6 +20,7 @@ use super::profile::ProfileRequest;
 use super::ri::RiRequest;
 use super::sensor_calibration::CalibrationOptions;
 use super::sfr::SfrRequest;
+use super::stability::StabilityOptions;
 use crate::params::{ParamDict, ParamError, Params, Schema, Value};
 use crate::{Error, Result};
 use std::path::Path;
@@ -39,6 +40,7 @@ pub const KINDS: &[&str] = &[
     "convergence",
     "conversion-gain",
     "sensor-calibration",
+    "stability",
 ];
 
 /// The schema of `measure "<kind>"`.
@@ -55,6 +57,7 @@ pub fn schema(kind: &str) -> Option<&'static Schema> {
         "convergence" => &super::convergence::SCHEMA,
         "conversion-gain" => &super::conversion_gain::SCHEMA,
         "sensor-calibration" => &super::sensor_calibration::SCHEMA,
+        "stability" => &super::stability::SCHEMA,
         _ => return None,
     })
 }
@@ -78,6 +81,7 @@ pub enum MeasureOptions {
     Convergence(ConvergenceOptions),
     ConversionGain(ConversionGainOptions),
     SensorCalibration(CalibrationOptions),
+    Stability(StabilityOptions),
 }
 
 /// Read the properties of `measure "<kind>"` (without `name`/`of`, which the
@@ -113,6 +117,7 @@ pub fn options(kind: &str, params: &Params, base_dir: &Path) -> Result<MeasureOp
         "sensor-calibration" => {
             MeasureOptions::SensorCalibration(super::sensor_calibration::from_params(&d)?)
         }
+        "stability" => MeasureOptions::Stability(super::stability::from_params(&d)?),
         _ => unreachable!("schema() knows the kind"),
     };
     d.finish()?;
@@ -142,6 +147,7 @@ impl MeasureOptions {
             MeasureOptions::Convergence(_) => "convergence",
             MeasureOptions::ConversionGain(_) => "conversion-gain",
             MeasureOptions::SensorCalibration(_) => "sensor-calibration",
+            MeasureOptions::Stability(_) => "stability",
         }
     }
 
@@ -191,6 +197,10 @@ impl MeasureOptions {
                     "e.g. reference-mean-dv=320.7 reference-variance-dv2=57.8 (Fig. 11's caption)",
                 ))
             }
+            MeasureOptions::Stability(s) if s.case.is_none() => {
+                Err(ParamError::section("stability needs case=\"<case>\"")
+                    .with_help(format!("one of: {}", super::stability::CASES.join(", "))))
+            }
             _ => Ok(()),
         }
     }
@@ -221,12 +231,12 @@ impl Needs {
 
 /// Stage requirements per measurement kind. `colorimetry` reads a spectrum
 /// only; `conversion-gain` and `sensor-calibration` the sensor's
-/// configuration only; `ri` and `convergence` can work on the optical image;
+/// configuration only (`stability` for its sensor cases); `ri` and `convergence` can work on the optical image;
 /// every other kind measures sensor digital values.
 pub fn needs(kind: &str) -> Needs {
     match kind {
         "colorimetry" | "compare" | "compare-curve" => Needs::default(),
-        "conversion-gain" | "sensor-calibration" => Needs {
+        "conversion-gain" | "sensor-calibration" | "stability" => Needs {
             sensor_config: true,
             ..Needs::default()
         },
@@ -245,8 +255,8 @@ pub fn needs(kind: &str) -> Needs {
 pub use super::inputs::{Inputs, label_box, to_window};
 
 /// Run measurement `name` (of the objects `of`) on a variant's rendered
-/// images. `compare` and `convergence` combine other measurements and are run
-/// by the experiment layer.
+/// images. `compare` and `convergence` combine other measurements, and
+/// `stability` renders on its own: the experiment layer runs them.
 pub fn run(name: &str, of: &[String], opts: &MeasureOptions, inp: &Inputs) -> Result<Measured> {
     let need_si = || {
         inp.si
@@ -385,8 +395,9 @@ pub fn run(name: &str, of: &[String], opts: &MeasureOptions, inp: &Inputs) -> Re
         }
         MeasureOptions::Compare(_)
         | MeasureOptions::CompareCurve(_)
-        | MeasureOptions::Convergence(_) => Err(Error::invalid(format!(
-            "measurement '{name}': {} combines other measurements of the experiment",
+        | MeasureOptions::Convergence(_)
+        | MeasureOptions::Stability(_) => Err(Error::invalid(format!(
+            "measurement '{name}': {} is run by the experiment layer",
             opts.kind()
         ))),
     }

@@ -147,6 +147,11 @@ pub fn probe(kind: &str, name: &str, opts: &MeasureOptions) -> Option<Value> {
             "tolerance-percent" => num(c.tolerance_percent),
             _ => None,
         },
+        ("stability", MeasureOptions::Stability(c)) => match name {
+            "case" => c.case.as_deref().and_then(text),
+            "tolerance-scale" => num(c.tolerance_scale),
+            _ => None,
+        },
         _ => None,
     }
 }
