@@ -159,10 +159,13 @@ pub fn convergence(
     measurement: &str,
     clipped: f64,
 ) -> Result<Measured> {
-    let ok: Vec<&Run> = runs
+    let mut ok: Vec<&Run> = runs
         .iter()
         .filter(|r| r.wall_s > 0.0 && r.samples > 0.0 && r.stderr > 0.0 && r.value.is_finite())
         .collect();
+    // The curves run along the time axis (a small run can take longer than a
+    // larger one when the fixed cost per run dominates).
+    ok.sort_by(|a, b| a.wall_s.total_cmp(&b.wall_s));
     if ok.len() < 2 {
         return Err(Error::invalid(format!(
             "convergence of '{quantity}' needs ≥ 2 runs with positive time and standard error"
@@ -233,12 +236,13 @@ pub fn convergence(
         figures.push(fig("error_at_longest", unit, d, longest.stderr));
         // The longest run against the reference in their combined standard
         // errors: > 3 says the figure converges to something else (bias).
+        // A z-score: its own spread between seeds is 1 (its standard error).
         let se = longest.stderr.hypot(rse);
         figures.push(fig(
             "error_z",
             "1",
             if se > 0.0 { d / se } else { f64::INFINITY },
-            0.0,
+            1.0,
         ));
         curves.push(Curve::new(
             &format!("error_vs_time#{quantity}"),
@@ -339,8 +343,8 @@ mod tests {
         let get = |q: &str| m.figures.iter().find(|f| f.quantity == q).unwrap().value;
         assert!((get("mtf50/stderr_time_slope") + 0.5).abs() < 1e-12);
         assert!((get("mtf50/stderr_samples_slope") + 0.5).abs() < 1e-12);
-        // an exact fit has no uncertainty: flagged (cannot be checked)
-        assert_eq!(get("mtf50/slope_off_minus_half"), 1.0);
+        // exactly −½ (a regression se at rounding level): not flagged
+        assert_eq!(get("mtf50/slope_off_minus_half"), 0.0);
         // efficiency at the longest run: 1/(se²·t) = 1/(0.1²/64 · 64)
         assert!((get("mtf50/efficiency") - 100.0).abs() < 1e-9);
     }
@@ -382,7 +386,7 @@ mod tests {
         let mut ok = rows(-0.5, None);
         ok[2].1 = 0.0;
         assert!(
-            flag_notes(&ok)[0].contains("as expected, but")
+            flag_notes(&ok)[0].contains("consistent with −½, but")
                 && flag_notes(&ok)[0].contains("5.0 combined")
         );
         ok[3].1 = 1.0;
