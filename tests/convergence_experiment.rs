@@ -168,3 +168,58 @@ fn clipped_patches_are_flagged_in_the_report() {
     );
     assert!(html.contains("convergence: stderr_vs_time"));
 }
+
+/// What convergence cannot follow is an error at `check`, at file:line.
+#[test]
+fn unfollowable_measurements_are_located_errors() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    // an 8×8 grey capture
+    let f = std::fs::File::create(d.join("flat.png")).unwrap();
+    let mut enc = png::Encoder::new(f, 8, 8);
+    enc.set_color(png::ColorType::Grayscale);
+    enc.set_depth(png::BitDepth::Eight);
+    enc.write_header()
+        .unwrap()
+        .write_image_data(&[128u8; 64])
+        .unwrap();
+    let zemax = root().join("lenses/zemax-reference/zemax_p4a_relative_illumination.csv");
+    let sensor = root().join("sensors/imx363.kdl");
+    let cases: Vec<(String, &str, &[&str])> = vec![
+        // conversion-gain's runs count frames: 2 … 10000
+        (
+            format!(
+                "experiment \"x\" {{\n    sensor \"{}\"\n    measure \"conversion-gain\"\n    measure \"convergence\" of=\"conversion-gain\" spp=(1 4 16)\n}}\n",
+                sensor.display()
+            ),
+            "4:",
+            &["counts frames: 1 is outside 2 … 10000"],
+        ),
+        // a compare-curve of a captured image has no renders to follow
+        (
+            format!(
+                "experiment \"x\" {{\n    measured \"cap\" file=\"flat.png\"\n    measure \"ri\" input=\"cap\"\n    measure \"compare-curve\" name=\"cc\" of=\"ri\" curve=\"ri\" reference-file=\"{}\"\n    measure \"convergence\" of=\"cc\" spp=(2 4 8)\n}}\n",
+                zemax.display()
+            ),
+            "5:",
+            &["'ri' is a 'ri' of a captured image"],
+        ),
+    ];
+    for (i, (text, at, needles)) in cases.iter().enumerate() {
+        let p = d.join(format!("case{i}.kdl"));
+        std::fs::write(&p, text).unwrap();
+        let o = Command::new(env!("CARGO_BIN_EXE_camsim"))
+            .args(["check", p.to_str().unwrap()])
+            .output()
+            .unwrap();
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "case {i}: {e}");
+        assert!(
+            e.contains(&format!("case{i}.kdl:{at}")),
+            "case {i}: at {at}: {e}"
+        );
+        for n in *needles {
+            assert!(e.contains(n), "case {i}: expected '{n}' in: {e}");
+        }
+    }
+}
