@@ -473,7 +473,7 @@ fn convergence_renders_each_spp_and_follows_the_figures() {
         assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
         let rows = results(&out.join("conv/results.csv"));
         for spp in [1, 4, 16] {
-            assert!(get(&rows, "convergence", &format!("spp{spp}/render_s")).0 > 0.0);
+            assert!(get(&rows, "convergence", &format!("spp{spp}/wall_s")).0 > 0.0);
             assert!(get(&rows, "convergence", &format!("ri@max/spp{spp}_stderr")).0 > 0.0);
         }
         let (slope, slope_se) = get(&rows, "convergence", "ri@max/stderr_time_slope");
@@ -490,7 +490,8 @@ fn convergence_renders_each_spp_and_follows_the_figures() {
         let curves =
             std::fs::read_to_string(out.join("conv/curves/default/convergence.csv")).unwrap();
         assert!(
-            curves.contains("ri@max/stderr_vs_time") && curves.contains("ri@max/error_vs_time")
+            curves.contains("stderr_vs_time#ri@max: slope")
+                && curves.contains("error_vs_time#ri@max")
         );
         // Everything but the timings is reproducible.
         all.push(
@@ -616,9 +617,10 @@ fn mcc_patch_stderr_halves_per_4x_spp() {
 /// whose pixels clip at the white level loses its spread as the render noise
 /// falls below the margin to the clip level, so its stderr falls faster than
 /// Monte Carlo (∞× once every pixel clips). Over-exposed 16×, the brightest
-/// patches clip: they are flagged and left out of the fits, the rest are fitted.
+/// patches clip: their slope is flagged (whatever it is) and they get no
+/// efficiency; the rest are fitted as usual.
 #[test]
-fn convergence_leaves_out_clipped_mcc_patches() {
+fn convergence_flags_clipped_mcc_patches() {
     let tmp = tempfile::tempdir().unwrap();
     let rows = mcc_convergence_run(tmp.path(), "exposure-s=8");
     let flags = |m: &str, end: &str| -> Vec<String> {
@@ -638,10 +640,16 @@ fn convergence_leaves_out_clipped_mcc_patches() {
         let q = flag.trim_end_matches("/clipped_fraction");
         assert!(q.ends_with("_mean"));
         assert!(get(&rows, "convergence", &flag).0 > 0.0);
+        assert_eq!(
+            get(&rows, "convergence", &format!("{q}/slope_off_minus_half")).0,
+            1.0,
+            "{q} clips: flagged"
+        );
         assert!(
-            !rows.iter().any(|r| r.0 == "convergence"
-                && (r.1 == format!("{q}/efficiency") || r.1 == format!("{q}/spp4_stderr"))),
-            "{q} clips: no fit"
+            !rows
+                .iter()
+                .any(|r| r.0 == "convergence" && r.1 == format!("{q}/efficiency")),
+            "{q} clips: no efficiency"
         );
     }
     // Patch 24 (black) is far from the white level and still followed.

@@ -255,13 +255,22 @@ fn run(dir: &Path, seed: u64, power: f64) {
             .map(|&t| {
                 let se = 0.004 / f64::sqrt(t);
                 Run {
-                    render_s: t,
+                    wall_s: t,
+                    samples: 64.0 * t,
                     value: s.mtf50_cy_per_px.unwrap() + se * rng.gauss(),
                     stderr: se,
                 }
             })
             .collect();
-        let m = convergence(&runs, s.mtf50_cy_per_px, "mtf50", "cy/px", "convergence").unwrap();
+        let m = convergence(
+            &runs,
+            s.mtf50_cy_per_px.map(|v| (v, 0.0)),
+            "mtf50",
+            "cy/px",
+            "convergence",
+            0.0,
+        )
+        .unwrap();
         write_curves(dir, variant, "convergence", &m.curves).unwrap();
         rows.extend(rows_of(&m, variant, focus));
     }

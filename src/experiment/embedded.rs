@@ -19,6 +19,8 @@ macro_rules! embed {
 
 /// (file name inside `experiments/`, contents)
 pub const EXPERIMENTS: &[(&str, &str)] = &[
+    embed!("convergence-ri.kdl"),
+    embed!("convergence.kdl"),
     embed!("cornell-box.kdl"),
     embed!("e2e-quick.kdl"),
     embed!("fig03-qe-correction.kdl"),

@@ -21,18 +21,21 @@
 //!   its mean over the pairs first (compares shapes, not exposure).
 //! - **convergence**: `measure "convergence" of="sfr" spp=(16 64 256)
 //!   [reference-spp=1024] [quantity="mtf50"]` (quantities containing that
-//!   text; default all) renders the region the named
-//!   measurement reads once per sample count (each with its own seed,
-//!   `render.seed + 1 + k`, so the runs are independent), runs the same
-//!   stages and measurement, and reports per quantity the log–log slope of
-//!   standard error against render time, the efficiency, and — with
-//!   `reference-spp` (rendered with the variant's seed) — the error against
-//!   that reference ([`crate::measure::convergence`]). Sensor measurements keep
-//!   the sensor's noise, which puts a floor under their standard error; the
+//!   text; default all) runs the followed measurement once per count, each
+//!   with its own seed (`render.seed + 1 + k`, so the runs are independent):
+//!   a render of the region it reads, the same stages and measurement; for a
+//!   `compare-curve`, the measurement it compares, then the comparison; for
+//!   the sensor-only `conversion-gain`, that many flat frames. Per quantity it
+//!   reports the log–log slopes of standard error against sample count and
+//!   against wall time, a flag when the first is not −½, the efficiency, and
+//!   — with `reference-spp` (the variant's seed, run first; the other runs
+//!   take its exposure time) — the error against that reference
+//!   ([`crate::measure::convergence`]). Sensor measurements keep the
+//!   sensor's noise, which puts a floor under their standard error; the
 //!   optical-image measurement `ri` shows the pure Monte Carlo error. MCC
-//!   patch means with clipped pixels in any run are not fitted (their
-//!   standard error collapses with the noise, not as t^(−½)); they get a
-//!   `<q>/clipped_fraction` figure instead.
+//!   patch means with clipped pixels in any run are flagged (their standard
+//!   error collapses with the noise, not as N^(−½)) with a
+//!   `<q>/clipped_fraction` figure, and get no efficiency.
 
 use super::apply::{ApplyError, check_input_name};
 use super::source::Span;
@@ -52,8 +55,59 @@ use std::time::Instant;
 
 /// Measurement kinds that can read a captured image (`input=`).
 pub const INPUT_KINDS: &[&str] = &["sfr", "mcc", "profile", "noise", "ri"];
-/// Measurement kinds whose figures convergence can follow.
-const CONVERGENCE_KINDS: &[&str] = &["sfr", "mcc", "profile", "noise", "ri"];
+/// Measurement kinds whose figures convergence can follow: rendered ones,
+/// a `compare-curve` of one of them (re-measured, then compared, per run) and
+/// the sensor-only `conversion-gain` (its runs count frames, not samples).
+const CONVERGENCE_KINDS: &[&str] = &[
+    "sfr",
+    "mcc",
+    "profile",
+    "noise",
+    "ri",
+    "compare-curve",
+    "conversion-gain",
+];
+/// Kinds a followed `compare-curve` may compare (rendered measurements).
+const RENDERED_KINDS: &[&str] = &["sfr", "mcc", "profile", "noise", "ri"];
+
+/// The measurement convergence `m` follows (`of`) and the one its runs
+/// measure: the same, or for a `compare-curve` the measurement it compares.
+fn followed<'a>(
+    spec: &'a ResolvedExperiment,
+    m: &Measure,
+    of: &str,
+) -> Result<(&'a Measure, &'a Measure), ApplyError> {
+    let t = spec
+        .measures
+        .iter()
+        .find(|x| x.name == of && x.name != m.name && x.kind == "compare-curve");
+    let (t, inner, kinds) = match t {
+        Some(t) => {
+            let inner = t.of.first().map(String::as_str).unwrap_or_default();
+            (t, check_measurement_ref(spec, t, inner)?, RENDERED_KINDS)
+        }
+        None => {
+            let t = check_measurement_ref(spec, m, of)?;
+            (t, t, CONVERGENCE_KINDS)
+        }
+    };
+    if !kinds.contains(&inner.kind.as_str()) || inner.params.get("input").is_some() {
+        return Err(ApplyError::new(format!(
+            "convergence follows a rendered measurement, a compare-curve of one, or conversion-gain ({}); '{}' is a '{}'{}",
+            CONVERGENCE_KINDS.join(", "),
+            inner.name,
+            inner.kind,
+            if inner.params.get("input").is_some() {
+                " of a captured image"
+            } else if t.name != inner.name {
+                " (compared by a compare-curve)"
+            } else {
+                ""
+            }
+        )));
+    }
+    Ok((t, inner))
+}
 
 /// The directory a measurement's relative files are resolved against.
 fn base_dir(spec: &ResolvedExperiment) -> &Path {
@@ -186,23 +240,27 @@ pub fn check_references(spec: &ResolvedExperiment) -> Result<(), (Span, ApplyErr
                 )?;
                 check_measurement_ref(spec, m, of).map_err(|e| (at("of"), e))?;
             }
-            MeasureOptions::Convergence(_) => {
+            MeasureOptions::Convergence(c) => {
                 let of = single_of(m, "e.g. measure \"convergence\" of=\"sfr\" spp=(16 64 256)")?;
-                let t = check_measurement_ref(spec, m, of).map_err(|e| (at("of"), e))?;
-                if !CONVERGENCE_KINDS.contains(&t.kind.as_str()) || t.params.get("input").is_some()
+                let (t, inner) = followed(spec, m, of).map_err(|e| (at("of"), e))?;
+                if inner.kind == "conversion-gain"
+                    && let Some(n) = c
+                        .spp
+                        .iter()
+                        .chain(&c.reference_spp)
+                        .find(|n| !(2..=10_000).contains(*n))
                 {
                     return Err((
-                        at("of"),
+                        at(if c.spp.contains(n) {
+                            "spp"
+                        } else {
+                            "reference-spp"
+                        }),
                         ApplyError::new(format!(
-                            "convergence follows a rendered measurement ({}); '{of}' is a '{}'{}",
-                            CONVERGENCE_KINDS.join(", "),
-                            t.kind,
-                            if t.params.get("input").is_some() {
-                                " of a captured image"
-                            } else {
-                                ""
-                            }
-                        )),
+                            "convergence of the sensor-only '{}' counts frames: {n} is outside 2 … 10000",
+                            t.name
+                        ))
+                        .help("e.g. spp=(4 16 64) reference-spp=1024 (frame counts)"),
                     ));
                 }
             }
@@ -521,9 +579,14 @@ pub fn compare(m: &Measure, of: &Measured, reference: &Measured) -> Result<Measu
     Ok(out)
 }
 
-/// `convergence`: render the target measurement's region at each spp and
-/// follow each of its figures' standard error against render time.
+/// One convergence run: its figures, wall time (s) and the sensor's exposure (s).
+type Run = (Vec<Figure>, f64, Option<f64>);
+
+/// `convergence`: run the followed measurement at each sample count (a
+/// render of its region, or frames of a sensor-only one) and follow each of
+/// its figures' standard error against the run's wall time.
 pub fn convergence(m: &Measure, spec: &ResolvedExperiment) -> Result<Measured> {
+    use crate::measure::convergence as conv;
     let MeasureOptions::Convergence(opts) = options_of(m, spec)? else {
         return Err(Error::invalid(format!(
             "measurement '{}' is not a convergence",
@@ -533,86 +596,130 @@ pub fn convergence(m: &Measure, spec: &ResolvedExperiment) -> Result<Measured> {
     let of =
         m.of.first()
             .ok_or_else(|| Error::invalid("convergence needs of=\"<measurement>\""))?;
-    let target = spec
-        .measures
-        .iter()
-        .find(|x| &x.name == of)
-        .ok_or_else(|| Error::invalid(format!("convergence: no measurement '{of}'")))?;
+    let (target, inner) = followed(spec, m, of)
+        .map_err(|e| Error::invalid(format!("convergence '{}': {}", m.name, e.message)))?;
     let filter = opts.quantity.as_deref();
     let mut sub = spec.clone();
-    sub.measures = vec![target.clone()];
-    let scene = stages::build_scene(&sub)?;
-    let camera = stages::build_camera(&sub, &scene)?;
-    let need = stages::needs(&target.kind);
-    let run_at = |spp: u64, seed: u64| -> Result<(Vec<Figure>, f64)> {
+    sub.measures = vec![inner.clone()];
+    let sensor_only = inner.kind == "conversion-gain";
+    let label = if sensor_only { "frames" } else { "spp" };
+    // The renderer's scene and camera are built once; a run's wall time is
+    // what the run itself costs (label pass, render, sensor, measurement).
+    let built = if sensor_only {
+        None
+    } else {
+        let scene = stages::build_scene(&sub)?;
+        let camera = stages::build_camera(&sub, &scene)?;
+        Some((scene, camera))
+    };
+    let need = needs_of(inner);
+    // One run: (figures, wall time, the sensor's exposure). `exposure`: a
+    // fixed exposure time replacing the sensor's (auto exposure included).
+    let run_at = |count: u64, seed: u64, exposure: Option<f64>| -> Result<Run> {
         let mut s = sub.clone();
-        s.render.spp = spp;
         s.render.seed = seed;
+        if let (Some(e), Some(sensor)) = (exposure, s.sensor.as_mut()) {
+            sensor
+                .overrides
+                .set("exposure-s", crate::params::Value::Number(e));
+        }
         let t = Instant::now();
-        let r = stages::render(&s, &scene, camera.as_ref())?;
-        let dt = t.elapsed().as_secs_f64();
-        let oi = r.oi;
-        let si = if need.sensor_image {
-            Some(stages::simulate_sensor(&s, &oi)?)
-        } else {
-            None
+        let mut exposure_s = None;
+        let measured = match &built {
+            None => {
+                let MeasureOptions::ConversionGain(mut o) = options_of(inner, &s)? else {
+                    return Err(Error::invalid("convergence: expected a conversion-gain"));
+                };
+                o.frames = count as usize;
+                let cfg = stages::sensor_config(&s)?.ok_or_else(|| {
+                    Error::invalid(format!("measurement '{}' needs a sensor", inner.name))
+                })?;
+                crate::measure::conversion_gain::measure(&cfg, &o, seed, &inner.name)?
+            }
+            Some((scene, camera)) => {
+                s.render.spp = count;
+                let r = stages::render(&s, scene, camera.as_ref())?;
+                let si = if need.sensor_image {
+                    Some(stages::simulate_sensor(&s, &r.oi)?)
+                } else {
+                    None
+                };
+                exposure_s = si.as_ref().map(|x| x.exposure_s);
+                stages::measure(inner, &s, Some(&r.oi), si.as_ref(), &r.object_rects)?
+            }
         };
-        Ok((
-            stages::measure(target, &s, Some(&oi), si.as_ref(), &r.object_rects)?.figures,
-            dt,
-        ))
+        let measured = if target.kind == "compare-curve" {
+            compare_curve(target, &s, &measured)?
+        } else {
+            measured
+        };
+        Ok((measured.figures, t.elapsed().as_secs_f64(), exposure_s))
     };
+    // The reference (or, without one, the largest count) runs first; the
+    // others take its exposure time. Auto exposure set from each run's own
+    // noisy render would differ between runs — its bright percentile is
+    // biased high at few samples — and bias every figure in DV.
+    let last = opts.spp.len() - 1;
+    let first = match opts.reference_spp {
+        Some(r) => run_at(r, spec.render.seed, None)?,
+        None => run_at(opts.spp[last], spec.render.seed + 1 + last as u64, None)?,
+    };
+    let exposure = first.2;
     let mut runs = vec![];
-    for (k, &spp) in opts.spp.iter().enumerate() {
-        runs.push((spp, run_at(spp, spec.render.seed + 1 + k as u64)?));
+    for (k, &n) in opts.spp.iter().enumerate() {
+        let r = if opts.reference_spp.is_none() && k == last {
+            first.clone()
+        } else {
+            run_at(n, spec.render.seed + 1 + k as u64, exposure)?
+        };
+        runs.push((n, (r.0, r.1)));
     }
-    let reference = match opts.reference_spp {
-        Some(r) => Some(run_at(r, spec.render.seed)?.0),
-        None => None,
-    };
+    let reference = opts.reference_spp.map(|_| first.0);
     let mut out = Measured::default();
-    for (spp, (_, dt)) in &runs {
+    if let Some(e) = exposure {
+        out.figures
+            .push(Figure::new(&m.name, "exposure_s", "s", e, 0.0));
+    }
+    for (n, (_, dt)) in &runs {
         out.figures.push(Figure::new(
             &m.name,
-            format!("spp{spp}/render_s"),
+            format!("{label}{n}/wall_s"),
             "s",
             *dt,
             0.0,
         ));
     }
+    // Wall time = fixed cost + cost per sample: the fixed part is why the
+    // slope against time is steeper than against samples at small counts.
+    let counts: Vec<f64> = runs.iter().map(|r| r.0 as f64).collect();
+    let times: Vec<f64> = runs.iter().map(|r| r.1.1).collect();
+    if let Some((a, _, sa, _)) = crate::measure::stats::line_fit(&counts, &times) {
+        out.figures
+            .push(Figure::new(&m.name, "fixed_cost_s", "s", a, sa));
+    }
     let matches = |q: &str| filter.is_none_or(|f| q.contains(f));
-    let (mut followed, mut clipped_out) = (0, 0);
+    let mut followed_n = 0;
     for f0 in runs[0].1.0.iter().filter(|f| matches(&f.quantity)) {
         let q = &f0.quantity;
         // A figure of clipped pixels (an MCC patch at the white level) does not
-        // follow Monte Carlo noise: report how much clipped, fit nothing.
+        // follow Monte Carlo noise: fitted and flagged, with how much clipped.
         let clipped = crate::measure::mcc::clipped_flag(q).map_or(0.0, |flag| {
             runs.iter()
                 .flat_map(|(_, (figs, _))| figs.iter().filter(|f| f.quantity == flag))
                 .map(|f| f.value)
                 .fold(0.0, f64::max)
         });
-        if clipped > 0.0 {
-            out.figures.push(Figure::new(
-                &m.name,
-                format!("{q}/clipped_fraction"),
-                "1",
-                clipped,
-                0.0,
-            ));
-            clipped_out += 1;
-            continue;
-        }
-        let (spp_of, series): (Vec<u64>, Vec<crate::measure::convergence::Run>) = runs
+        let (counts_of, series): (Vec<u64>, Vec<conv::Run>) = runs
             .iter()
-            .filter_map(|(spp, (figs, dt))| {
+            .filter_map(|(n, (figs, dt))| {
                 let f = figs
                     .iter()
                     .find(|f| &f.quantity == q && f.unit == f0.unit)?;
                 Some((
-                    *spp,
-                    crate::measure::convergence::Run {
-                        render_s: *dt,
+                    *n,
+                    conv::Run {
+                        wall_s: *dt,
+                        samples: *n as f64,
                         value: f.value,
                         stderr: f.stderr,
                     },
@@ -621,7 +728,7 @@ pub fn convergence(m: &Measure, spec: &ResolvedExperiment) -> Result<Measured> {
             .unzip();
         if series
             .iter()
-            .filter(|r| r.stderr > 0.0 && r.render_s > 0.0)
+            .filter(|r| r.stderr > 0.0 && r.wall_s > 0.0)
             .count()
             < 2
         {
@@ -629,39 +736,29 @@ pub fn convergence(m: &Measure, spec: &ResolvedExperiment) -> Result<Measured> {
         }
         let rv = reference
             .as_ref()
-            .and_then(|r| r.iter().find(|f| &f.quantity == q))
-            .map(|f| f.value);
-        let mut c = crate::measure::convergence::convergence(&series, rv, q, &f0.unit, &m.name)?;
-        for (spp, r) in spp_of.iter().zip(&series) {
+            .and_then(|r| r.iter().find(|f| &f.quantity == q && f.unit == f0.unit))
+            .map(|f| (f.value, f.stderr));
+        let mut c = conv::convergence(&series, rv, q, &f0.unit, &m.name, clipped)?;
+        for (n, r) in counts_of.iter().zip(&series) {
             c.figures.push(Figure::new(
                 &m.name,
-                format!("{q}/spp{spp}_stderr"),
+                format!("{q}/{label}{n}_stderr"),
                 &f0.unit,
                 r.stderr,
                 0.0,
             ));
         }
-        for cv in &mut c.curves {
-            cv.name = format!("{q}/{}", cv.name);
-        }
         out.figures.extend(c.figures);
         out.curves.extend(c.curves);
-        followed += 1;
+        followed_n += 1;
     }
-    if followed == 0 {
+    if followed_n == 0 {
         return Err(Error::invalid(format!(
-            "convergence '{}': no figure of '{of}'{} has a standard error in ≥ 2 runs{}",
+            "convergence '{}': no figure of '{of}'{} has a standard error in ≥ 2 runs",
             m.name,
             filter
                 .map(|q| format!(" matching quantity=\"{q}\""))
                 .unwrap_or_default(),
-            if clipped_out > 0 {
-                format!(
-                    " ({clipped_out} left out because their pixels clip at the sensor's white level or floor; shorten the exposure)"
-                )
-            } else {
-                String::new()
-            }
         )));
     }
     Ok(out)

@@ -138,6 +138,8 @@ struct PlotOut {
 #[derive(Serialize)]
 struct MeasOut {
     name: String,
+    /// Flagged convergence slopes, with their likely reason.
+    notes: Vec<String>,
     corner: String,
     head: Vec<String>,
     rows: Vec<MRow>,
@@ -701,8 +703,25 @@ pub fn write_report(dir: &Path) -> Result<()> {
                 plots.extend(plot_for(format!("plot{pid}"), spec, vec![s]));
             }
         }
+        // Convergence: a slope that is not −½ within its uncertainty, named.
+        let mut notes = vec![];
+        for v in &mvars {
+            let vr: Vec<(String, f64, f64)> = mr
+                .iter()
+                .filter(|r| &r.variant == *v)
+                .map(|r| (r.quantity.clone(), r.value, r.stderr))
+                .collect();
+            for n in crate::measure::convergence::flag_notes(&vr) {
+                notes.push(if mvars.len() > 1 {
+                    format!("{v}: {n}")
+                } else {
+                    n
+                });
+            }
+        }
         mouts.push(MeasOut {
             name: m.clone(),
+            notes,
             corner,
             head,
             rows: table_rows,
@@ -976,6 +995,23 @@ pub fn write_index(root: &Path) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    #[test]
+    fn convergence_curves_are_drawn_log_log() {
+        let c = crate::measure::Curve::new(
+            "stderr_vs_time#q",
+            ("wall time", "s"),
+            ("standard error", "DV"),
+            vec![1.0, 4.0],
+            vec![0.2, 0.1],
+            vec![],
+        );
+        for name in ["stderr_vs_time", "error_vs_time"] {
+            let s = curve_spec("conv", name, &c);
+            assert!(s.log_x && s.log_y, "{name}");
+        }
+        assert!(!curve_spec("sfr", "mtf", &c).log_y);
+    }
+
     #[test]
     fn number_formatting_and_base64() {
         assert_eq!(fmt_num(0.219384), "0.21938");

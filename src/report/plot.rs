@@ -71,8 +71,12 @@ fn range(v: impl Iterator<Item = f64>, log: bool) -> Option<(f64, f64)> {
         return None;
     }
     Some(if log {
-        if hi / lo < 1.0001 {
-            (lo / 2.0, hi * 2.0)
+        if hi / lo < 8.0 {
+            // at least a decade around the data: a log axis labels only
+            // powers of ten, so a narrower one would carry no numbers
+            let c = (hi * lo).sqrt();
+            let k = (hi / lo).sqrt().max(10f64.sqrt()) * 1.1;
+            (c / k, c * k)
         } else {
             (lo / (hi / lo).powf(0.03), hi * (hi / lo).powf(0.03))
         }
@@ -275,6 +279,9 @@ mod tests {
             "{}",
             &svg[..200.min(svg.len())]
         );
+        // a log axis spans at least a decade (labelled powers of ten)
+        let (lo, hi) = range([0.2, 0.3].into_iter(), true).unwrap();
+        assert!(hi / lo >= 10.0 && lo < 0.2 && hi > 0.3, "{lo} {hi}");
         let empty = Series {
             name: "b".into(),
             points: vec![(f64::NAN, 1.0)],
