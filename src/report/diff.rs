@@ -15,7 +15,10 @@
 //! The relative floor keeps exact figures (standard error 0, e.g. a geometric
 //! constant) from flagging float-level noise, and very precise figures from
 //! flagging changes no engineer would act on. Figures present on one side
-//! only are listed but do not count as significant.
+//! only are listed but do not count as significant, and neither do figures
+//! of wall time (a convergence run's `…/wall_s`, its time slope, efficiency
+//! and fixed cost: [`crate::measure::convergence::depends_on_wall_time`]),
+//! which follow the machine's load, not the inputs.
 //!
 //! A side is a directory (one experiment's `results.csv`, or a results root
 //! holding `<experiment>/results.csv`) or, when no such directory exists, a
@@ -151,7 +154,9 @@ pub fn diff_rows(a: &[ResultRow], b: &[ResultRow], opts: &DiffOptions) -> DiffRe
                         f64::NAN
                     },
                     z,
-                    significant: z > zt && d.abs() > floor,
+                    significant: z > zt
+                        && d.abs() > floor
+                        && !crate::measure::convergence::depends_on_wall_time(&ra.quantity),
                 });
             }
         }
@@ -441,5 +446,18 @@ mod tests {
             .z_threshold(190),
             3.0
         );
+    }
+
+    #[test]
+    fn wall_time_figures_are_listed_but_never_significant() {
+        let a = [row("v", "mcc/spp16/wall_s", 2.0, 0.0)];
+        let b = [row("v", "mcc/spp16/wall_s", 9.0, 0.0)];
+        let d = diff_rows(&a, &b, &DiffOptions::default());
+        assert_eq!(d.changes.len(), 1);
+        assert!(!d.changes[0].significant);
+        // the same change on a reproducible figure is significant
+        let a = [row("v", "mcc/spp16/mean", 2.0, 0.0)];
+        let b = [row("v", "mcc/spp16/mean", 9.0, 0.0)];
+        assert!(diff_rows(&a, &b, &DiffOptions::default()).changes[0].significant);
     }
 }
