@@ -3,24 +3,16 @@
 //! the convergence measurement. Synthetic captures are written analytically
 //! into a temp dir, so every expected number comes from a formula here.
 
+mod common;
+use common::{camsim, stderr};
+
 use camsim::experiment::measured;
 use camsim::experiment::spec::Measure;
 use camsim::figure::Figure;
 use camsim::measure::Measured;
 use camsim::params::{Params, Value};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn camsim(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_camsim"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+use std::process::Output;
 
 /// erf by Abramowitz & Stegun 7.1.26 (|error| ≤ 1.5e-7, far below the 16-bit
 /// quantisation of the synthetic image).

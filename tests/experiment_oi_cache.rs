@@ -5,21 +5,13 @@
 //!
 //! The experiments are small (480 × 270 film, 4 spp, 1 bounce: ~0.1 s each).
 
+mod common;
+use common::{camsim, stderr};
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
 const ROOT: &str = env!("CARGO_MANIFEST_DIR");
-
-fn camsim(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_camsim"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
 
 /// A one-triangle OBJ (an asset whose bytes the scene reads).
 const TRIANGLE: &str = "v 0 0 0\nv 0.02 0 0\nv 0 0.02 0\nf 1 2 3\n";

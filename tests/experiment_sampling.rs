@@ -7,21 +7,13 @@
 //! patch means carry Monte Carlo error only, which more samples lower), one
 //! bounce, the MCC's pixels only (~0.1 s per 4 spp).
 
+mod common;
+use common::{camsim, stderr};
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
 const ROOT: &str = env!("CARGO_MANIFEST_DIR");
-
-fn camsim(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_camsim"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
 
 /// The experiment `name` with `render` line and extra `body` lines.
 fn text(name: &str, scene: &Path, render: &str, body: &str) -> String {

@@ -5,16 +5,11 @@
 //! one directory and from `camsim merge`, a failing summary, and the located
 //! errors of `check`.
 
+mod common;
+use common::camsim;
+
 use camsim::report::results::{ResultRow, read_results};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn camsim(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_camsim"))
-        .args(args)
-        .output()
-        .unwrap()
-}
 
 fn p(x: &Path) -> &str {
     x.to_str().unwrap()

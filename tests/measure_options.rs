@@ -2,13 +2,15 @@
 //! (`camsim::measure::options`), bad ones are errors naming the property,
 //! and `camsim check` locates them at file:line:col.
 
+mod common;
+use common::camsim;
+
 #[path = "params_reach/measure.rs"]
 mod reach;
 
 use camsim::measure::request::{KINDS, kdl_text, options, schema, schemas};
 use camsim::params::{Params, Value};
 use std::path::Path;
-use std::process::{Command, Output};
 
 /// A value as written in KDL: "text", #true/#false, a number or (a b …).
 /// (This test's own reader, so the examples are not read by the code under test.)
@@ -169,13 +171,6 @@ fn unknown_misspelt_wrong_typed_and_out_of_range_properties_are_named() {
         e.message.contains("fit-degree"),
         "lists the accepted names: {e}"
     );
-}
-
-fn camsim(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_camsim"))
-        .args(args)
-        .output()
-        .unwrap()
 }
 
 #[test]

@@ -5,18 +5,11 @@
 //! the sensor's size, CFA pattern and black level.
 
 mod common;
+use common::camsim;
 
 use std::path::Path;
-use std::process::{Command, Output};
 
 const ROOT: &str = env!("CARGO_MANIFEST_DIR");
-
-fn camsim(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_camsim"))
-        .args(args)
-        .output()
-        .unwrap()
-}
 
 fn write(dir: &Path, name: &str, text: &str) -> String {
     let p = dir.join(name);

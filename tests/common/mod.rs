@@ -1,6 +1,21 @@
 //! Helpers shared by integration tests (`mod common;` in a test file).
 #![allow(dead_code)]
 
+use std::process::{Command, Output};
+
+/// Run the camsim binary under test with `args` (its output captured).
+pub fn camsim(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_camsim"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+/// The standard error text of a finished command.
+pub fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
 /// Numeric rows of a reference CSV table. Blank lines and `#` comment lines
 /// are skipped, and so is one header line (the first that is not numbers);
 /// any other non-numeric line is a broken reference file and panics.
