@@ -70,6 +70,9 @@ pub struct SensorBench {
     pub threads: usize,
     /// The machine: CPU model and vector width.
     pub cpu: crate::machine::Cpu,
+    /// The instruction set the sensor's row kernels ran with (`CAMSIM_SENSOR_ISA`
+    /// lowers it).
+    pub kernel_isa: &'static str,
     /// Wall time of `simulate` (best of `runs`), seconds.
     pub simulate_s: f64,
     /// CPU time (all threads) of the same run, seconds: on a busy machine wall time
@@ -96,6 +99,7 @@ impl std::fmt::Display for SensorBench {
             self.cpu.model.replace(',', ";")
         )?;
         writeln!(f, "sensor,vector_width,text,{}", self.cpu.vector)?;
+        writeln!(f, "sensor,kernel_isa,text,{}", self.kernel_isa)?;
         for (when, l) in [("before", self.load_before), ("after", self.load_after)] {
             match l {
                 Some(l) => writeln!(f, "sensor,load_average_1min_{when},1,{:.2}", l[0])?,
@@ -214,6 +218,7 @@ pub fn bench_sensor_runs(runs: usize) -> Result<SensorBench> {
         bands: nb,
         threads: rayon::current_num_threads(),
         cpu: crate::machine::cpu(),
+        kernel_isa: super::readout::Isa::detect().name(),
         simulate_s: best,
         simulate_cpu_s: best_cpu,
         optical_image_bytes: (oi.irradiance.len() * std::mem::size_of::<f32>()) as u64,
@@ -223,4 +228,28 @@ pub fn bench_sensor_runs(runs: usize) -> Result<SensorBench> {
         load_after: load_average(),
         peak_memory_bytes: peak_memory_bytes(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The stream-read sum is the sum of every float, for chunk sizes that do and
+    /// do not divide the data and on 1 and 2 threads: integers 1..=n sum exactly in
+    /// f32 (every partial sum stays below 2^24 for n = 4000).
+    #[test]
+    fn stream_read_sum_reads_every_float_once() {
+        let n = 4000usize;
+        let data: Vec<f32> = (1..=n).map(|i| i as f32).collect();
+        let exact = (n * (n + 1) / 2) as f32;
+        for threads in [1, 2] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            for chunk in [1, 7, 16, 33, 1000, 5000] {
+                assert_eq!(pool.install(|| stream_read_sum(&data, chunk)), exact);
+            }
+        }
+    }
 }
