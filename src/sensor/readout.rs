@@ -9,8 +9,9 @@
 //! the row (photon counts, fixed-pattern gains and offsets, read-noise normals, then
 //! the arithmetic that combines them), each a short loop whose iterations do not
 //! depend on one another, instead of one long per-pixel chain: the CPU overlaps many
-//! pixels, and the ≈ 20 % of Poisson draws whose first PTRS proposal is rejected
-//! (an unpredictable branch) are finished in a separate loop. Each pixel sees
+//! pixels, and the Poisson draws whose first PTRS proposal is rejected (an
+//! unpredictable branch: 1 − 0.86·v_r of them, 65 % at μ = 10, 33 % at 100, 24 % at
+//! 1000, 22 % at 6000) are finished in a separate loop. Each pixel sees
 //! exactly the operations, in the same order, of a pixel-by-pixel evaluation, so
 //! the split changes no value.
 
@@ -115,6 +116,14 @@ impl Isa {
                 }
             };
             let cap = std::env::var("CAMSIM_SENSOR_ISA").unwrap_or_default();
+            if !["", "baseline", "avx2", "avx512"].contains(&cap.as_str()) {
+                static WARNED: std::sync::Once = std::sync::Once::new();
+                WARNED.call_once(|| {
+                    eprintln!(
+                        "warning: CAMSIM_SENSOR_ISA=\"{cap}\" ignored (expected baseline, avx2 or avx512)"
+                    )
+                });
+            }
             if cap != "baseline" && cap != "avx2" && has("avx512") {
                 return Isa::Avx512;
             }
