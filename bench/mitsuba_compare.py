@@ -128,10 +128,29 @@ def mitsuba_reference(mi, dr, scene, spp, batches, pass_spp, cache):
     return ref, var
 
 
+# The machine as camsim's `bench render` reports it ("cpu: MODEL (VECTOR WIDTH)").
+CAMSIM_CPU = []
+
+
+def machine_cpu():
+    """CPU model and vector width: camsim's own report, else /proc/cpuinfo."""
+    if CAMSIM_CPU:
+        return CAMSIM_CPU[-1]
+    try:
+        info = open("/proc/cpuinfo").read().splitlines()
+        model = next(line.split(":", 1)[1].strip() for line in info if line.startswith("model name"))
+        flags = next(line.split(":", 1)[1].split() for line in info if line.startswith("flags"))
+        width = "avx512f" if "avx512f" in flags else "avx2+fma" if {"avx2", "fma"} <= set(flags) else "sse"
+        return f"{' '.join(model.split())} ({width})"
+    except (OSError, StopIteration):
+        return "unknown"
+
+
 def run_camsim(camsim, spp, seed, y_out, threads):
     cmd = [camsim, "bench", "render", "--spp", str(spp), "--ref-spp", "0", "--bvh", "bvh4",
            "--threads", str(threads), "--seed", str(seed), "--y-out", y_out]
     out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
+    CAMSIM_CPU.extend(line[len("cpu: "):] for line in out.splitlines() if line.startswith("cpu: "))
     kv_line = [line for line in out.splitlines() if line.startswith("camsim-bench ")][-1]
     kv = dict(re.findall(r"(\w+)=(\S+)", kv_line))
     return read_pfm(y_out), float(kv["wall_s"]), float(kv["cpu_s"])
@@ -274,9 +293,10 @@ def main():
     print()
     print(f"RATIO camsim/Mitsuba: paths/s {pps_c / (paths / tm):.3f} (wall), {cm / cc:.3f} (CPU); "
           f"equal-time RMSE {res[k_all][1]:.3f} (wall), {res[k_all][2]:.3f} (CPU); "
-          f"light transport only {res[k_lt][1]:.3f} (wall); equal-spp RMSE {res[k_all][0]:.3f}  [RMSE < 1 = camsim better]")
+          f"light transport only {res[k_lt][1]:.3f} (wall); equal-spp RMSE {res[k_all][0]:.3f}  [RMSE < 1 = camsim better]; "
+          f"CPU {machine_cpu()}, load {os.getloadavg()[0]:.1f}")
     with open(os.path.join(a.cache, "last_result.json"), "w") as f:
-        json.dump({"load_average": os.getloadavg()[0],
+        json.dump({"load_average": os.getloadavg()[0], "cpu": machine_cpu(),
                    "mitsuba": {"variant": variant, "spp": a.spp, "wall_s": tm, "cpu_s": cm, "rel_rmse": rm},
                    "camsim": {"spp": a.spp, "wall_s": tc, "cpu_s": cc, "rel_rmse": rc},
                    "camsim_equal_time": {"spp": spp_eq, "wall_s": te, "cpu_s": ce, "rel_rmse": re_}},

@@ -9,6 +9,7 @@ pub mod diag;
 pub mod experiment;
 pub mod figure;
 pub mod image;
+pub mod machine;
 pub mod measure;
 pub mod optical_image;
 pub mod optics;

@@ -40,6 +40,9 @@ fn bench_scene_mean_luminance_matches_mitsuba() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(stdout.contains("camsim-bench spp=1 "), "{stdout}");
+    // the machine beside the speed (issue 17): "cpu: MODEL (VECTOR WIDTH)"
+    let cpu = format!("cpu: {}", camsim::machine::cpu());
+    assert!(stdout.lines().any(|l| l == cpu), "{cpu} not in {stdout}");
     let m = read_pfm_mean(&y);
     assert!((m / 0.15380 - 1.0).abs() < 0.02, "mean Y {m}");
 

@@ -1,6 +1,6 @@
 //! Runs the sensor benchmark on demand (not part of the normal suite, no timing
 //! assertions): `cargo test --release --test sensor_bench -- --ignored --nocapture`.
-//! The lead wires `camsim::sensor::bench_sensor()` into `camsim bench sensor`.
+//! `camsim bench sensor` prints the same report.
 
 #[test]
 #[ignore]

@@ -205,6 +205,7 @@ pub fn bench(a: BenchArgs) -> Result<i32> {
                 reference_var: a.reference_var,
                 y_out: a.y_out,
             })?;
+            println!("cpu: {}", camsim::machine::cpu());
             println!("{r}");
             Ok(0)
         }

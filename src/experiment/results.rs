@@ -133,6 +133,10 @@ pub struct Manifest {
     pub git_commit: String,
     pub git_dirty: Option<bool>,
     pub threads: usize,
+    /// The machine's CPU model and vector width (wall times depend on both);
+    /// empty in manifests written before it was recorded.
+    #[serde(default)]
+    pub cpu: String,
     /// `[i, n]` for a shard run.
     pub shard: Option<[usize; 2]>,
     pub axes: Vec<String>,
@@ -161,6 +165,7 @@ impl Manifest {
             git_commit,
             git_dirty,
             threads,
+            cpu: crate::machine::cpu().to_string(),
             shard: shard.map(|(i, n)| [i, n]),
             axes: plan.axes.clone(),
             quality: plan.quality.clone(),

@@ -22,6 +22,7 @@ pub mod flatfield;
 pub mod nnls;
 pub mod output;
 pub mod pipeline;
+pub mod readout;
 pub mod relative_illumination;
 pub mod rng;
 pub mod sensor_params;

@@ -28,7 +28,8 @@
 //! `SensorConfig::fpn_seed`; temporal noise on the frame seed.
 
 use super::config::{Exposure, RelativeIllumination, SensorConfig};
-use super::rng::{PixelRng, stream};
+use super::readout::{Readout, RowOut, Scratch};
+pub use super::readout::{fpn_column, fpn_pixel};
 use crate::diag::{Error, Result};
 use crate::image::SensorImage;
 use crate::optical_image::{OpticalImage, Rect};
@@ -197,11 +198,13 @@ fn run(cfg: &SensorConfig, oi: &OpticalImage, seed: u64, keep: bool) -> Result<S
         .chain(&ym.weights)
         .all(|v| v.len() == 1 && v[0].1 == 1.0)
         && xm.weights.windows(2).all(|p| p[1][0].0 == p[0][0].0 + 1);
-    // Pass 1: mean electrons per second per pixel (relative illumination included).
-    let mut rate = vec![0f32; window.area() as usize];
-    let bad = if identity {
+    // Signal rate (mean electrons per second, relative illumination included) of
+    // one window row; `true` when the row's irradiance is invalid.
+    let bad_anywhere;
+    let rate_row: Box<RateRow> = if identity {
         // Same grid: one OI pixel per sensor pixel; f32 dot products over the bands,
         // with a finiteness/sign check folded in (sum must be finite, min ≥ 0).
+        bad_anywhere = false;
         let wf: Vec<Vec<f32>> = w
             .iter()
             .map(|wc| wc.iter().map(|&v| v as f32).collect())
@@ -209,58 +212,58 @@ fn run(cfg: &SensorConfig, oi: &OpticalImage, seed: u64, keep: bool) -> Result<S
         let x0 = xm.weights[0][0].0 as usize;
         let phases = channel_rows(cfg, window);
         let use_ri = ri_active(cfg);
-        rate.par_chunks_mut(window.w as usize)
-            .enumerate()
-            .map(|(r, row)| {
-                let yf = window.y + r as u32;
-                let oy = ym.weights[r][0].0 as usize;
-                let chans = &phases[(yf % cfg.cfa.height) as usize];
-                let base = (oy * oiw + x0) * nb;
-                let mut bad = false;
-                for (cix, out) in row.iter_mut().enumerate() {
-                    let p = &irr[base + cix * nb..][..nb];
-                    let (d, ok) = dot_check(&wf[chans[cix] as usize], p);
-                    bad |= !ok;
-                    *out = if use_ri {
-                        (d as f64 * ri_at(cfg, full, window.x + cix as u32, yf)) as f32
-                    } else {
-                        d
-                    };
-                }
-                bad
-            })
-            .reduce(|| false, |a, b| a || b)
+        let ym = &ym;
+        Box::new(move |r, row| {
+            let yf = window.y + r as u32;
+            let oy = ym.weights[r][0].0 as usize;
+            let chans = &phases[(yf % cfg.cfa.height) as usize];
+            let base = (oy * oiw + x0) * nb;
+            let mut bad = false;
+            for (cix, out) in row.iter_mut().enumerate() {
+                let p = &irr[base + cix * nb..][..nb];
+                let (d, ok) = dot_check(&wf[chans[cix] as usize], p);
+                bad |= !ok;
+                *out = if use_ri {
+                    (d as f64 * ri_at(cfg, full, window.x + cix as u32, yf)) as f32
+                } else {
+                    d
+                };
+            }
+            bad
+        })
     } else {
-        let bad = irr
+        bad_anywhere = irr
             .par_chunks(1 << 16)
             .any(|c| c.iter().any(|v| !(*v >= 0.0 && v.is_finite())));
-        rate.par_chunks_mut(window.w as usize)
-            .enumerate()
-            .for_each(|(r, row)| {
-                let yf = window.y + r as u32;
-                for (cix, out) in row.iter_mut().enumerate() {
-                    let xf = window.x + cix as u32;
-                    let wc = &w[cfg.cfa.channel_at(xf, yf)];
-                    let mut acc = 0.0f64;
-                    for &(iy, wy) in &ym.weights[r] {
-                        for &(ix, wx) in &xm.weights[cix] {
-                            let p = &irr[(iy as usize * oiw + ix as usize) * nb..][..nb];
-                            let mut d = 0.0f64;
-                            for b in 0..nb {
-                                d += wc[b] * p[b] as f64;
-                            }
-                            acc += wy * wx * d;
+        let (xm, ym, w) = (&xm, &ym, &w);
+        Box::new(move |r, row| {
+            let yf = window.y + r as u32;
+            for (cix, out) in row.iter_mut().enumerate() {
+                let xf = window.x + cix as u32;
+                let wc = &w[cfg.cfa.channel_at(xf, yf)];
+                let mut acc = 0.0f64;
+                for &(iy, wy) in &ym.weights[r] {
+                    for &(ix, wx) in &xm.weights[cix] {
+                        let p = &irr[(iy as usize * oiw + ix as usize) * nb..][..nb];
+                        let mut d = 0.0f64;
+                        for b in 0..nb {
+                            d += wc[b] * p[b] as f64;
                         }
+                        acc += wy * wx * d;
                     }
-                    *out = (acc * ri_at(cfg, full, xf, yf)) as f32;
                 }
-            });
-        bad
+                *out = (acc * ri_at(cfg, full, xf, yf)) as f32;
+            }
+            false
+        })
     };
+    const BAD_IRRADIANCE: &str = "optical image irradiance has negative or non-finite values";
+    if bad_anywhere {
+        return Err(Error::invalid(BAD_IRRADIANCE));
+    }
+    let (mut f, bad) = expose(cfg, full, window, &*rate_row, seed, keep)?;
     if bad {
-        return Err(Error::invalid(
-            "optical image irradiance has negative or non-finite values",
-        ));
+        return Err(Error::invalid(BAD_IRRADIANCE));
     }
     let labels = if identity
         && window.w == oi.window.w
@@ -279,7 +282,6 @@ fn run(cfg: &SensorConfig, oi: &OpticalImage, seed: u64, keep: bool) -> Result<S
     } else {
         vec![]
     };
-    let mut f = noise_pass(cfg, full, window, rate, seed, keep)?;
     f.image.labels = labels;
     f.image.label_names = oi.label_names.clone();
     Ok(f)
@@ -362,17 +364,15 @@ pub fn simulate_flat(
         .map(|wc| wc.iter().zip(&e).map(|(a, b)| a * b).sum())
         .collect();
     let full = (cols, rows);
-    let mut rate = vec![0f32; window.area() as usize];
-    rate.par_chunks_mut(window.w as usize)
-        .enumerate()
-        .for_each(|(r, row)| {
-            let yf = window.y + r as u32;
-            for (c, out) in row.iter_mut().enumerate() {
-                let xf = window.x + c as u32;
-                *out = (per_ch[cfg.cfa.channel_at(xf, yf)] * ri_at(cfg, full, xf, yf)) as f32;
-            }
-        });
-    noise_pass(cfg, full, window, rate, seed, true)
+    let rate_row = |r: usize, row: &mut [f32]| {
+        let yf = window.y + r as u32;
+        for (c, out) in row.iter_mut().enumerate() {
+            let xf = window.x + c as u32;
+            *out = (per_ch[cfg.cfa.channel_at(xf, yf)] * ri_at(cfg, full, xf, yf)) as f32;
+        }
+        false
+    };
+    Ok(expose(cfg, full, window, &rate_row, seed, true)?.0)
 }
 
 /// Mean signal electrons per second per CFA channel for a uniform irradiance (on axis).
@@ -421,184 +421,130 @@ pub fn resolve_exposure_s(cfg: &SensorConfig, rate_e_per_s: &[f32]) -> Result<f6
     }
 }
 
-/// PRNU gain and DSNU offset (volts) of full-frame pixel index `gi`, as drawn
-/// (before switches): (1 + σ_PRNU·n₁, σ_DSNU·n₂).
-#[inline]
-pub fn fpn_pixel(cfg: &SensorConfig, gi: u64) -> (f64, f64) {
-    fpn_pixel_keyed(
-        cfg,
-        PixelRng::stream_key(cfg.fpn_seed, stream::FPN_PIXEL),
-        gi,
-    )
-}
+/// The signal rate of one window row (index, output row); `true` when the row's
+/// irradiance is invalid.
+type RateRow<'a> = dyn Fn(usize, &mut [f32]) -> bool + Sync + 'a;
 
-#[inline(always)]
-fn fpn_pixel_keyed(cfg: &SensorConfig, key: u64, gi: u64) -> (f64, f64) {
-    let mut r = PixelRng::keyed(key, gi);
-    let n1 = r.normal();
-    let n2 = r.normal();
-    ((1.0 + cfg.prnu * n1).max(0.0), cfg.dsnu_v * n2)
-}
-
-/// Column FPN gain and offset (volts) of full-frame column `x`.
-#[inline]
-pub fn fpn_column(cfg: &SensorConfig, x: u32) -> (f64, f64) {
-    let mut r = PixelRng::new(cfg.fpn_seed, stream::FPN_COLUMN, x as u64);
-    let n1 = r.normal();
-    let n2 = r.normal();
-    (1.0 + cfg.column_fpn_gain * n1, cfg.column_fpn_offset_v * n2)
-}
-
-fn noise_pass(
+/// Expose `window` of a `full` sensor whose signal rate rows come from `rate_row`
+/// (which reports invalid irradiance), and read it out. With a fixed exposure time
+/// each row is read out as soon as its rate is known, so the signal is never held
+/// as a frame; auto exposure needs every rate first (a percentile), then reads out.
+/// Returns the frame and whether any rate row reported invalid irradiance.
+fn expose(
     cfg: &SensorConfig,
     full: (u32, u32),
     window: Rect,
-    rate: Vec<f32>,
+    rate_row: &RateRow,
     seed: u64,
     keep: bool,
-) -> Result<SensorFrame> {
-    let t = resolve_exposure_s(cfg, &rate)?;
-    if !(t.is_finite() && t >= 0.0) {
-        return Err(Error::invalid(format!(
-            "exposure time must be finite and ≥ 0 s, found {t}"
-        )));
-    }
-    let src = cfg.sources;
-    let cg = cfg.conversion_gain_v_per_e();
-    let dark_e = if src.dark_current {
-        cfg.dark_voltage_v_per_s * t / cg
-    } else {
-        0.0
-    };
-    let full_well = cfg.full_well_e();
-    let dv_per_v = cfg.analog_gain / cfg.quantization_step_v();
-    let white = cfg.white_level_dv();
-    let black = cfg.black_level_dv;
-    let use_prnu = src.prnu && cfg.prnu > 0.0;
-    let use_dsnu = src.dsnu && cfg.dsnu_v > 0.0;
-    let use_read = src.read_noise && cfg.read_noise_v > 0.0;
-    let use_reset = src.reset_noise && cfg.reset_noise_v > 0.0;
-    let use_col = src.column_fpn && (cfg.column_fpn_gain > 0.0 || cfg.column_fpn_offset_v > 0.0);
-    let cols: Vec<(f64, f64)> = (0..window.w)
-        .map(|c| {
-            if use_col {
-                fpn_column(cfg, window.x + c)
-            } else {
-                (1.0, 0.0)
-            }
-        })
-        .collect();
+) -> Result<(SensorFrame, bool)> {
     let n = window.area() as usize;
     let ww = window.w as usize;
-    let mut dv = vec![0f32; n];
-    let k_photon = PixelRng::stream_key(seed, stream::PHOTON);
-    let k_read = PixelRng::stream_key(seed, stream::READ);
-    let k_fpn = PixelRng::stream_key(cfg.fpn_seed, stream::FPN_PIXEL);
-    let to_mean = |r: f32| (r as f64 * t + dark_e) as f32;
-    let body = |r: usize,
-                mean_row: &[f32],
-                dv_row: &mut [f32],
-                e_row: &mut [f32],
-                v_row: Option<&mut [f32]>| {
-        let yf = (window.y as usize + r) as u64;
-        let mut v_row = v_row;
-        for c in 0..ww {
-            let xf = window.x as u64 + c as u64;
-            let gi = yf * full.0 as u64 + xf;
-            let mu = mean_row[c] as f64;
-            let mut e = if src.photon_noise {
-                PixelRng::keyed(k_photon, gi).poisson(mu)
-            } else {
-                mu
-            };
-            let (g, off) = if use_prnu || use_dsnu {
-                fpn_pixel_keyed(cfg, k_fpn, gi)
-            } else {
-                (1.0, 0.0)
-            };
-            if use_prnu {
-                e *= g;
+    let fixed = match cfg.exposure {
+        Exposure::Seconds(t) if t.is_finite() && t >= 0.0 => Some(t),
+        _ => None,
+    };
+    let (rate, t) = match fixed {
+        Some(t) => (None, t),
+        None => {
+            let mut rate = vec![0f32; n];
+            let bad = rate
+                .par_chunks_mut(ww)
+                .enumerate()
+                .map(|(r, row)| rate_row(r, row))
+                .reduce(|| false, |a, b| a || b);
+            if bad {
+                return Ok((empty_frame(cfg, full, window), true));
             }
-            if src.clipping {
-                e = e.min(full_well);
+            let t = resolve_exposure_s(cfg, &rate)?;
+            if !(t.is_finite() && t >= 0.0) {
+                return Err(Error::invalid(format!(
+                    "exposure time must be finite and ≥ 0 s, found {t}"
+                )));
             }
-            let mut v = e * cg;
-            if use_dsnu {
-                v += off;
-            }
-            if use_col {
-                let (cgn, coff) = cols[c];
-                v = v * cgn + coff;
-            }
-            if use_read || use_reset {
-                // read noise is the stream's first normal, reset noise its second,
-                // so switching one off leaves the other's values unchanged
-                let mut rr = PixelRng::keyed(k_read, gi);
-                let n1 = rr.normal();
-                if use_read {
-                    v += cfg.read_noise_v * n1;
-                }
-                if use_reset {
-                    v += cfg.reset_noise_v * rr.normal();
-                }
-            }
-            let mut d = v * dv_per_v + black;
-            if src.quantization {
-                d = super::rng::fast_round(d);
-            }
-            if src.clipping {
-                d = d.clamp(0.0, white);
-            }
-            dv_row[c] = d as f32;
-            e_row[c] = e as f32;
-            if let Some(vr) = v_row.as_deref_mut() {
-                vr[c] = v as f32;
-            }
+            (Some(rate), t)
         }
     };
-    let (electrons, mean) = if keep {
-        // Mean electrons in place over the rate buffer, kept; electrons separate.
-        let mut mean = rate;
-        mean.par_iter_mut().for_each(|r| *r = to_mean(*r));
-        let mut electrons = vec![0f32; n];
-        let mut volts = vec![0f32; n];
-        dv.par_chunks_mut(ww)
-            .zip(electrons.par_chunks_mut(ww))
-            .zip(volts.par_chunks_mut(ww))
-            .enumerate()
-            .for_each(|(r, ((d, e), v))| body(r, &mean[r * ww..(r + 1) * ww], d, e, Some(v)));
-        (electrons, Some((mean, volts)))
-    } else {
-        // Electrons overwrite the rate buffer row by row (one frame-sized buffer less).
-        let mut buf = rate;
-        dv.par_chunks_mut(ww)
-            .zip(buf.par_chunks_mut(ww))
-            .enumerate()
-            .for_each(|(r, (d, row))| {
-                let m: Vec<f32> = row.iter().map(|&x| to_mean(x)).collect();
-                body(r, &m, d, row, None)
-            });
-        (buf, None)
-    };
-    let (mean, volts) = mean.unwrap_or_default();
+    let ro = Readout::new(cfg, full, window, t, seed);
+    let mut dv = vec![0f32; n];
+    let mut electrons = vec![0f32; n];
+    let mut volts = if keep { vec![0f32; n] } else { vec![] };
+    let mut mean = if keep { vec![0f32; n] } else { vec![] };
+    // Every output row with its index; volts and mean rows only when kept.
+    fn opt_rows(v: &mut [f32], ww: usize, rows: u32) -> Vec<Option<&mut [f32]>> {
+        if v.is_empty() {
+            (0..rows).map(|_| None).collect()
+        } else {
+            v.chunks_mut(ww).map(Some).collect()
+        }
+    }
+    let vrows = opt_rows(&mut volts, ww, window.h);
+    let mrows = opt_rows(&mut mean, ww, window.h);
+    let bad = dv
+        .par_chunks_mut(ww)
+        .zip(electrons.par_chunks_mut(ww))
+        .zip(vrows.into_par_iter())
+        .zip(mrows.into_par_iter())
+        .enumerate()
+        .map_init(
+            || (Scratch::default(), vec![0f32; ww]),
+            |(scratch, m), (r, (((d, e), v), mr))| {
+                let mut bad = false;
+                let m: &mut [f32] = match mr {
+                    Some(mr) => mr,
+                    None => m,
+                };
+                match &rate {
+                    Some(rate) => m.copy_from_slice(&rate[r * ww..(r + 1) * ww]),
+                    None => bad = rate_row(r, m),
+                }
+                for x in m.iter_mut() {
+                    *x = ro.mean_electrons(*x);
+                }
+                let out = RowOut {
+                    dv: d,
+                    electrons: e,
+                    volts: v,
+                };
+                ro.row(r, m, out, scratch);
+                bad
+            },
+        )
+        .reduce(|| false, |a, b| a || b);
     let image = SensorImage {
-        full_width: full.0,
-        full_height: full.1,
-        window,
-        pixel_pitch_m: cfg.pixel_size_m,
-        cfa: cfg.cfa.clone(),
         dv,
         electrons,
-        black_level_dv: black,
-        white_level_dv: white,
-        conversion_gain_dv_per_e: cfg.conversion_gain_dv_per_e(),
-        labels: vec![],
-        label_names: vec![],
         exposure_s: t,
+        ..empty_frame(cfg, full, window).image
     };
-    Ok(SensorFrame {
-        image,
-        volts,
-        mean_electrons: mean,
-    })
+    Ok((
+        SensorFrame {
+            image,
+            volts,
+            mean_electrons: mean,
+        },
+        bad,
+    ))
+}
+
+fn empty_frame(cfg: &SensorConfig, full: (u32, u32), window: Rect) -> SensorFrame {
+    SensorFrame {
+        image: SensorImage {
+            full_width: full.0,
+            full_height: full.1,
+            window,
+            pixel_pitch_m: cfg.pixel_size_m,
+            cfa: cfg.cfa.clone(),
+            dv: vec![],
+            electrons: vec![],
+            black_level_dv: cfg.black_level_dv,
+            white_level_dv: cfg.white_level_dv(),
+            conversion_gain_dv_per_e: cfg.conversion_gain_dv_per_e(),
+            labels: vec![],
+            label_names: vec![],
+            exposure_s: 0.0,
+        },
+        volts: vec![],
+        mean_electrons: vec![],
+    }
 }
