@@ -543,3 +543,27 @@ pub fn check_input_name<'a>(
         .or_else(|| Some(format!("add measured \"{name}\" file=\"captures/….png\"")));
     Err(e)
 }
+
+/// `spec` with a `quality "NAME"` preset's render settings and targets in
+/// place (`camsim run --quality NAME`, and `check` of each preset). A
+/// preset's target replaces the `render` node's of the same measurement and
+/// quantity.
+pub fn apply_quality(
+    spec: &mut ResolvedExperiment,
+    preset: &super::spec::QualityPreset,
+    loader: super::source::Loader,
+) -> Result<(), (super::source::Span, ApplyError)> {
+    for (k, v) in &preset.params.0 {
+        apply(spec, &format!("render.{k}"), v, loader)
+            .map_err(|e| (preset.spans.value_at(k, preset.span), e))?;
+    }
+    for t in &preset.targets {
+        spec.render.targets.retain(|o| {
+            (o.measurement.as_str(), o.quantity.as_deref())
+                != (t.measurement.as_str(), t.quantity.as_deref())
+        });
+        spec.render.targets.push(t.clone());
+    }
+    spec.render.span = preset.span;
+    Ok(())
+}

@@ -87,7 +87,7 @@ pub fn check_stages_with(
     // Each quality preset, applied as `camsim run --quality NAME` applies it.
     for q in &spec.qualities {
         let mut s = spec.clone();
-        q.apply_to(&mut s, super::source::Loader::Disk)?;
+        super::apply::apply_quality(&mut s, q, super::source::Loader::Disk)?;
         check_sampling(&s).map_err(|(sp, mut e)| {
             e.message = format!("quality \"{}\": {}", q.name, e.message);
             (sp, e)

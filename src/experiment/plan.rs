@@ -134,8 +134,7 @@ fn with_quality(
             Some(format!("{q} (not defined: the render node's settings)")),
         ));
     };
-    preset
-        .apply_to(&mut spec, parsed.loader)
+    super::apply::apply_quality(&mut spec, &preset, parsed.loader)
         .map_err(|(sp, e)| parsed.sources.error(sp, e.message).with_help_opt(e.help))?;
     Ok((spec, Some(q.to_string())))
 }

@@ -239,29 +239,6 @@ pub struct QualityPreset {
     pub spans: PropSpans,
 }
 
-impl QualityPreset {
-    /// `spec` with this preset's render settings and targets in place.
-    pub fn apply_to(
-        &self,
-        spec: &mut ResolvedExperiment,
-        loader: super::source::Loader,
-    ) -> Result<(), (Span, super::apply::ApplyError)> {
-        for (k, v) in &self.params.0 {
-            super::apply::apply(spec, &format!("render.{k}"), v, loader)
-                .map_err(|e| (self.spans.value_at(k, self.span), e))?;
-        }
-        for t in &self.targets {
-            spec.render.targets.retain(|o| {
-                (o.measurement.as_str(), o.quantity.as_deref())
-                    != (t.measurement.as_str(), t.quantity.as_deref())
-            });
-            spec.render.targets.push(t.clone());
-        }
-        spec.render.span = self.span;
-        Ok(())
-    }
-}
-
 /// One requested measurement.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Measure {

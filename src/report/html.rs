@@ -341,12 +341,13 @@ fn curve_spec(measurement: &str, name: &str, c: &crate::measure::Curve) -> PlotS
     }
 }
 
-/// One variant's error-driven sampling, as the report shows it.
+/// One variant's error-driven sampling, as the report shows it (read from
+/// the manifest's `sampling` record as JSON, like the rest of the manifest).
 #[derive(Serialize)]
 struct SamplingOut {
     variant: String,
     spp: u64,
-    rounds: u32,
+    rounds: u64,
     render_s: String,
     wall_s: String,
     stopped: String,
@@ -354,9 +355,20 @@ struct SamplingOut {
     met: usize,
     targeted: usize,
     /// The figures that did not meet their target.
-    unmet: Vec<crate::experiment::sampling::FigureRecord>,
-    /// The worst figure: `measurement/quantity stderr (target)`.
+    unmet: Vec<UnmetFigure>,
+    /// The worst figure: `measurement/quantity ± stderr unit (target …)`.
     worst: String,
+}
+
+/// A figure above its target.
+#[derive(Serialize)]
+struct UnmetFigure {
+    measurement: String,
+    quantity: String,
+    value: String,
+    stderr: String,
+    target: String,
+    allowed: String,
 }
 
 /// Each variant's sampling record from the manifest (empty when no variant
@@ -368,52 +380,72 @@ fn sampling_out(manifest: Option<&serde_json::Value>) -> Vec<SamplingOut> {
     else {
         return vec![];
     };
+    let text = |v: &serde_json::Value, k: &str| {
+        v.get(k).and_then(|x| x.as_str()).unwrap_or("").to_string()
+    };
+    let num =
+        |v: &serde_json::Value, k: &str| v.get(k).and_then(|x| x.as_f64()).unwrap_or(f64::NAN);
     vs.iter()
         .filter_map(|v| {
             let id = v.get("id")?.as_str()?.to_string();
-            let r: crate::experiment::sampling::SamplingRecord =
-                serde_json::from_value(v.get("sampling")?.clone()).ok()?;
-            let worst = r
-                .figures
+            let r = v.get("sampling")?;
+            let figs = r.get("figures")?.as_array()?;
+            let met = |f: &serde_json::Value| f.get("met").and_then(|m| m.as_bool()) == Some(true);
+            // stderr / allowed: how far a figure is from its target
+            let ratio = |f: &serde_json::Value| {
+                let (se, al) = (num(f, "stderr"), num(f, "allowed"));
+                if al > 0.0 {
+                    se / al
+                } else if se > 0.0 {
+                    f64::INFINITY
+                } else {
+                    0.0
+                }
+            };
+            let worst = figs
                 .iter()
-                .max_by(|a, b| {
-                    let q = |f: &crate::experiment::sampling::FigureRecord| {
-                        if f.allowed > 0.0 {
-                            f.stderr / f.allowed
-                        } else if f.stderr > 0.0 {
-                            f64::INFINITY
-                        } else {
-                            0.0
-                        }
-                    };
-                    q(a).total_cmp(&q(b))
-                })
+                .max_by(|a, b| ratio(a).total_cmp(&ratio(b)))
                 .map(|f| {
                     format!(
                         "{}/{}: ± {} {} (target {})",
-                        f.measurement,
-                        f.quantity,
-                        fmt_se(f.stderr),
-                        f.unit,
-                        f.target
+                        text(f, "measurement"),
+                        text(f, "quantity"),
+                        fmt_se(num(f, "stderr")),
+                        text(f, "unit"),
+                        text(f, "target")
                     )
                 })
                 .unwrap_or_default();
+            let budget_reached = r
+                .get("budget_reached")
+                .and_then(|b| b.as_bool())
+                .unwrap_or(false);
             Some(SamplingOut {
                 variant: id,
-                spp: r.spp,
-                rounds: r.rounds,
-                render_s: fmt_num(r.render_s),
-                wall_s: fmt_num(r.wall_s),
-                stopped: if r.budget_reached {
-                    format!("{}: budget reached", r.stopped.as_str())
+                spp: r.get("spp").and_then(|x| x.as_u64()).unwrap_or(0),
+                rounds: r.get("rounds").and_then(|x| x.as_u64()).unwrap_or(0),
+                render_s: fmt_num(num(r, "render_s")),
+                wall_s: fmt_num(num(r, "wall_s")),
+                stopped: if budget_reached {
+                    format!("{}: budget reached", text(r, "stopped"))
                 } else {
                     "target met".into()
                 },
-                budget_reached: r.budget_reached,
-                met: r.figures.iter().filter(|f| f.met).count(),
-                targeted: r.figures.len(),
-                unmet: r.figures.iter().filter(|f| !f.met).cloned().collect(),
+                budget_reached,
+                met: figs.iter().filter(|f| met(f)).count(),
+                targeted: figs.len(),
+                unmet: figs
+                    .iter()
+                    .filter(|f| !met(f))
+                    .map(|f| UnmetFigure {
+                        measurement: text(f, "measurement"),
+                        quantity: text(f, "quantity"),
+                        value: fmt_num(num(f, "value")),
+                        stderr: fmt_se(num(f, "stderr")),
+                        target: text(f, "target"),
+                        allowed: fmt_num(num(f, "allowed")),
+                    })
+                    .collect(),
                 worst,
             })
         })
