@@ -89,6 +89,16 @@ fn run_ok(exp: &Path, out: &Path, extra: &[&str]) -> Output {
     o
 }
 
+/// Experiment "t" with `render` run once (no cache) into `s`'s directory `o`:
+/// that directory, the run log, and the variant's sampling record.
+fn run_sampled(s: &Setup, render: &str) -> (PathBuf, String, serde_json::Value) {
+    let exp = write(s, "t.kdl", text("t", &s.scene, render, ""));
+    let out = s.dir.path().join("o");
+    let log = stderr(&run_ok(&exp, &out, &["--no-cache"]));
+    let rec = manifest(&out, "t")["variants"][0]["sampling"].clone();
+    (out, log, rec)
+}
+
 #[test]
 fn a_target_is_met_deterministically_for_any_thread_count() {
     let s = setup();
@@ -145,19 +155,11 @@ fn the_sampled_standard_errors_are_honest_against_a_converged_reference() {
     // A combination rule that ignored the earlier rounds' weights, or
     // under-counted their errors, fails this.
     let s = setup();
-    let exp = write(
+    let (out, _, rec) = run_sampled(
         &s,
-        "t.kdl",
-        text(
-            "t",
-            &s.scene,
-            "render spp=4 max-bounces=1 seed=11 target-stderr=\"2%\" max-spp=4096 max-s=600",
-            "",
-        ),
+        "render spp=4 max-bounces=1 seed=11 target-stderr=\"2%\" max-spp=4096 max-s=600",
     );
-    let out = s.dir.path().join("o");
-    run_ok(&exp, &out, &["--no-cache"]);
-    let rec = &manifest(&out, "t")["variants"][0]["sampling"];
+    let rec = &rec;
     assert_eq!(rec["stopped"], "target", "{rec}");
     let spp = rec["spp"].as_u64().unwrap();
     let refx = write(
@@ -192,19 +194,11 @@ fn the_sampled_standard_errors_are_honest_against_a_converged_reference() {
 #[test]
 fn an_unreachable_target_stops_at_the_budget_and_is_flagged() {
     let s = setup();
-    let exp = write(
+    let (out, log, rec) = run_sampled(
         &s,
-        "t.kdl",
-        text(
-            "t",
-            &s.scene,
-            "render spp=4 max-bounces=1 seed=3 max-spp=32 {\n        target \"mcc\" quantity=\"patch19/g_mean\" stderr=\"0.001%\"\n    }",
-            "",
-        ),
+        "render spp=4 max-bounces=1 seed=3 max-spp=32 {\n        target \"mcc\" quantity=\"patch19/g_mean\" stderr=\"0.001%\"\n    }",
     );
-    let out = s.dir.path().join("o");
-    let log = stderr(&run_ok(&exp, &out, &["--no-cache"]));
-    let rec = &manifest(&out, "t")["variants"][0]["sampling"];
+    let rec = &rec;
     assert_eq!(rec["stopped"], "spp-budget", "{rec}");
     assert_eq!(rec["budget_reached"], true);
     assert_eq!(rec["spp"], 32);
@@ -375,19 +369,11 @@ fn a_floor_that_samples_cannot_lower_stops_as_stalled() {
     // a row falling < ⅓ of the 1/√n law) and stop, flagged, well before the
     // sample budget.
     let s = setup();
-    let exp = write(
+    let (_, log, rec) = run_sampled(
         &s,
-        "t.kdl",
-        text(
-            "t",
-            &s.scene,
-            "render spp=4 max-bounces=1 seed=3 target-stderr=\"0.3%\" max-spp=100000",
-            "",
-        ),
+        "render spp=4 max-bounces=1 seed=3 target-stderr=\"0.3%\" max-spp=100000",
     );
-    let out = s.dir.path().join("o");
-    let log = stderr(&run_ok(&exp, &out, &["--no-cache"]));
-    let rec = &manifest(&out, "t")["variants"][0]["sampling"];
+    let rec = &rec;
     assert_eq!(rec["stopped"], "stalled", "{rec}");
     assert_eq!(rec["budget_reached"], true);
     assert!(rec["spp"].as_u64().unwrap() < 100_000);

@@ -558,11 +558,7 @@ pub fn apply_quality(
             .map_err(|e| (preset.spans.value_at(k, preset.span), e))?;
     }
     for t in &preset.targets {
-        spec.render.targets.retain(|o| {
-            (o.measurement.as_str(), o.quantity.as_deref())
-                != (t.measurement.as_str(), t.quantity.as_deref())
-        });
-        spec.render.targets.push(t.clone());
+        spec.render.set_target(t.clone());
     }
     spec.render.span = preset.span;
     Ok(())

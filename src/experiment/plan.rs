@@ -120,23 +120,30 @@ pub fn plan_with(parsed: &Parsed, o: PlanOverrides) -> Result<Plan, Located> {
 
 /// The experiment's spec with the `quality "NAME"` preset applied, and the
 /// plan's quality line.
-fn with_quality(
-    parsed: &Parsed,
+fn with_quality<'a>(
+    parsed: &'a Parsed,
     quality: Option<&str>,
-) -> Result<(super::spec::ResolvedExperiment, Option<String>), Located> {
-    let mut spec = parsed.spec.clone();
+) -> Result<
+    (
+        std::borrow::Cow<'a, super::spec::ResolvedExperiment>,
+        Option<String>,
+    ),
+    Located,
+> {
+    use std::borrow::Cow;
     let Some(q) = quality else {
-        return Ok((spec, None));
+        return Ok((Cow::Borrowed(&parsed.spec), None));
     };
-    let Some(preset) = parsed.spec.qualities.iter().find(|p| p.name == q).cloned() else {
+    let Some(preset) = parsed.spec.qualities.iter().find(|p| p.name == q) else {
         return Ok((
-            spec,
+            Cow::Borrowed(&parsed.spec),
             Some(format!("{q} (not defined: the render node's settings)")),
         ));
     };
-    super::apply::apply_quality(&mut spec, &preset, parsed.loader)
+    let mut spec = parsed.spec.clone();
+    super::apply::apply_quality(&mut spec, preset, parsed.loader)
         .map_err(|(sp, e)| parsed.sources.error(sp, e.message).with_help_opt(e.help))?;
-    Ok((spec, Some(q.to_string())))
+    Ok((Cow::Owned(spec), Some(q.to_string())))
 }
 
 /// Hash of everything a variant's results depend on: camsim's version, the

@@ -258,10 +258,9 @@ pub fn run_variant_with(
                     let (more, st, _) = render_round(&settings)?;
                     render_s += t1.elapsed().as_secs_f64();
                     image.combine(&more).map_err(Error::invalid)?;
-                    if st == "miss" || status == "miss" {
-                        status = "miss";
-                    } else if st == "off" {
-                        status = "off";
+                    // any round rendered afresh makes the image a miss
+                    if st != "hit" {
+                        status = st;
                     }
                     None
                 }

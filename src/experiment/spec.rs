@@ -150,6 +150,17 @@ impl RenderSettings {
     pub fn error_driven(&self) -> bool {
         self.target_stderr.is_some() || !self.targets.is_empty()
     }
+
+    /// Add a `target` child; it replaces an earlier target of the same
+    /// measurement and quantity (a base's, or the `render` node's for a
+    /// quality preset).
+    pub fn set_target(&mut self, t: FigureTarget) {
+        self.targets.retain(|o| {
+            (o.measurement.as_str(), o.quantity.as_deref())
+                != (t.measurement.as_str(), t.quantity.as_deref())
+        });
+        self.targets.push(t);
+    }
 }
 
 impl Default for RenderSettings {

@@ -25,11 +25,7 @@ impl P {
             self.render_prop(spec, &k, ks, &e, "render")?;
         }
         for t in self.parse_targets(file, n, "render")? {
-            spec.render.targets.retain(|o| {
-                (o.measurement.as_str(), o.quantity.as_deref())
-                    != (t.measurement.as_str(), t.quantity.as_deref())
-            });
-            spec.render.targets.push(t);
+            spec.render.set_target(t);
         }
         Ok(())
     }
