@@ -114,4 +114,42 @@ mod tests {
         assert!((r0.weight - std::f64::consts::PI / 16.0).abs() < 1e-15);
         assert!(Pinhole::new(0.0, 2.0, &film).is_err());
     }
+
+    /// The film distance follows from the field of view alone: the shorter
+    /// side (1 mm) subtends 60°, so d = 0.5 mm / tan 30° (analytic).
+    #[test]
+    fn film_distance_is_half_short_side_over_tan_half_fov() {
+        let film = FilmSpec {
+            width_px: 200,
+            height_px: 100,
+            pixel_pitch_m: 1e-5,
+            crop_window: None,
+        };
+        let p = Pinhole::new(60.0, 2.0, &film).unwrap();
+        let d = 0.5e-3 / 30f64.to_radians().tan();
+        let from_trait = Camera::film_distance_m(&p).unwrap();
+        assert!((from_trait - d).abs() < 1e-15, "{from_trait} vs {d}");
+    }
+
+    /// Without the fall-off every ray carries the on-axis weight π/(4N²);
+    /// with it, a ray at 30° carries cos⁴30° = 9/16 of that.
+    #[test]
+    fn cos4_switch_sets_the_off_axis_weight() {
+        let film = FilmSpec {
+            width_px: 200,
+            height_px: 100,
+            pixel_pitch_m: 1e-5,
+            crop_window: None,
+        };
+        let on_axis = std::f64::consts::PI / 16.0;
+        let edge = DVec2::new(0.0, 50.0 * 1e-5);
+        let p = Pinhole::new(60.0, 2.0, &film).unwrap();
+        let w = p.sample_ray(edge, DVec2::ZERO, 550.0).unwrap().weight;
+        assert!((w - on_axis * 9.0 / 16.0).abs() < 1e-15, "{w}");
+        let flat = p.with_cos4(false);
+        assert!(!flat.cos4);
+        let w = flat.sample_ray(edge, DVec2::ZERO, 550.0).unwrap().weight;
+        assert!((w - on_axis).abs() < 1e-15, "{w}");
+        assert!(flat.describe().contains("no cos⁴"));
+    }
 }
