@@ -115,6 +115,32 @@ impl OpticalImage {
         let i = (y as usize * self.window.w as usize + x as usize) * nb;
         &mut self.irradiance[i..i + nb]
     }
+    /// Average each run of `k` consecutive bands into one band of `buckets`
+    /// (made by `buckets.subdivided(k)`): the bucket means pbrt-v4's spectral
+    /// film records. Standard errors become the mean of the `k` sub-band
+    /// errors — an upper bound, since the sub-bands share their paths
+    /// (sd(Σxᵢ/k) ≤ Σsd(xᵢ)/k). Per-weight-set errors are kept as they are
+    /// (they were computed for whole pixels, not per band). Sums in f64.
+    pub fn average_band_groups(&self, k: usize, buckets: WavelengthGrid) -> Result<Self, String> {
+        let nb = self.bands();
+        if k == 0 || buckets.len() * k != nb {
+            return Err(format!(
+                "cannot average {nb} bands in groups of {k} into {} buckets",
+                buckets.len()
+            ));
+        }
+        let avg = |v: &[f32]| -> Vec<f32> {
+            v.chunks_exact(k)
+                .map(|c| (c.iter().map(|&x| x as f64).sum::<f64>() / k as f64) as f32)
+                .collect()
+        };
+        Ok(Self {
+            irradiance: avg(&self.irradiance),
+            stderr: avg(&self.stderr),
+            grid: buckets,
+            ..self.clone()
+        })
+    }
     /// Fold an independent render of the same window (another round of
     /// error-driven sampling, its own seed) into this one: each value becomes
     /// the spp-weighted mean (n₁m₁ + n₂m₂)/(n₁ + n₂), each standard error
@@ -178,6 +204,30 @@ mod combine_tests {
         o.weighted_stderr = vec![se; 2];
         o.spp = spp;
         o
+    }
+
+    #[test]
+    fn band_groups_average_into_their_buckets() {
+        // Two buckets of width 10 nm centred at 400 and 410 nm, each split
+        // into 4 sub-bands of 2.5 nm centred at 396.25 … 413.75 nm.
+        let buckets = WavelengthGrid {
+            start_nm: 400.0,
+            step_nm: 10.0,
+            count: 2,
+        };
+        let fine = buckets.subdivided(4);
+        assert_eq!(fine.len(), 8);
+        assert!((fine.wavelength(0) - 396.25).abs() < 1e-12);
+        assert!((fine.wavelength(7) - 413.75).abs() < 1e-12);
+        let mut o = OpticalImage::new(1, 1, Rect::new(0, 0, 1, 1), 1e-6, fine);
+        o.irradiance = vec![1.0, 2.0, 3.0, 4.0, 10.0, 10.0, 20.0, 20.0];
+        o.stderr = vec![0.1, 0.1, 0.3, 0.3, 1.0, 1.0, 1.0, 1.0];
+        let b = o.average_band_groups(4, buckets.clone()).unwrap();
+        assert_eq!(b.grid, buckets);
+        assert_eq!(b.irradiance, vec![2.5, 15.0]);
+        assert!((b.stderr[0] - 0.2).abs() < 1e-7 && (b.stderr[1] - 1.0).abs() < 1e-7);
+        // A group size that does not tile the bands is refused.
+        assert!(o.average_band_groups(3, buckets).is_err());
     }
 
     #[test]

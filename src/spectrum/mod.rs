@@ -77,6 +77,20 @@ impl WavelengthGrid {
     pub fn stop_nm(&self) -> f64 {
         self.wavelength(self.count.saturating_sub(1))
     }
+    /// The grid that splits each band of this one (taken as a bucket of
+    /// width `step_nm` centred on its wavelength, as pbrt-v4's spectral film
+    /// buckets) into `k` equal sub-bands, sampled at their centres: bucket
+    /// `i` is the mean of fine bands `i·k … i·k + k − 1` (midpoint rule over
+    /// the bucket).
+    pub fn subdivided(&self, k: usize) -> Self {
+        let k = k.max(1);
+        let step = self.step_nm / k as f64;
+        Self {
+            start_nm: self.start_nm - 0.5 * self.step_nm + 0.5 * step,
+            step_nm: step,
+            count: self.count * k,
+        }
+    }
     /// Width of band `i` for integration (trapezoid weights: half at the ends).
     pub fn trapezoid_weight(&self, i: usize) -> f64 {
         if self.count == 1 {

@@ -22,7 +22,8 @@ pub fn differences_from_pbrt(l: &LoadedScene) -> Vec<String> {
             .to_string(),
         "spectral grid: camsim's bands (400–700 nm every 10 nm) unless a spectral Film sets \
          nbuckets/lambdamin/lambdamax (pbrt-v4's own default is 16 buckets over 360–830 nm); \
-         each bucket is sampled at its centre, where pbrt averages over it"
+         each bucket is the mean of sub-bands ≤ 2.5 nm wide sampled at their centres (`camsim \
+         render`), where pbrt averages over it with random wavelengths"
             .to_string(),
     ];
     d.push(match l.dialect.version {

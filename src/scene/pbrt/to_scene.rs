@@ -79,7 +79,8 @@ pub struct FilmParams {
     pub diagonal_mm: f64,
     /// A `spectral` film's buckets when the file sets `nbuckets`, `lambdamin`
     /// or `lambdamax` (pbrt-v4 defaults 16, 360, 830 fill the others): one
-    /// band per bucket, at its centre, as pbrt-v4 names its channels.
+    /// band per bucket, named by its centre as pbrt-v4 names its channels
+    /// (`camsim render` averages sub-bands over each bucket).
     pub spectral_grid: Option<crate::spectrum::WavelengthGrid>,
 }
 
@@ -305,7 +306,7 @@ pub fn film_params(ty: &str, tspan: Span, p: &ParamList, ctx: &mut Ctx) -> PResu
 }
 
 /// pbrt-v4's spectral film buckets: `nbuckets` equal buckets over
-/// [`lambdamin`, `lambdamax`], sampled at their centres.
+/// [`lambdamin`, `lambdamax`], as a grid of their centres.
 fn spectral_grid(p: &ParamList, tspan: Span) -> PResult<crate::spectrum::WavelengthGrid> {
     let n = p.int("nbuckets", 16)?;
     let lo = p.float("lambdamin", 360.0)?;
