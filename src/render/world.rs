@@ -406,12 +406,7 @@ impl World {
                 }
             }
         }
-        let total: f32 = power.iter().map(|p| p.max(0.0)).sum();
-        let light_pmf: Vec<f32> = if total > 0.0 && total.is_finite() {
-            power.iter().map(|p| p.max(0.0) / total).collect()
-        } else {
-            vec![1.0 / power.len().max(1) as f32; power.len()]
-        };
+        let light_pmf = selection_pmf(&power);
         let mut acc = 0.0;
         let mut light_cdf: Vec<f32> = light_pmf
             .iter()
@@ -621,6 +616,45 @@ impl World {
         };
         self.light_pmf[light as usize] * dist * dist / (cos_l.abs() * area)
     }
+}
+
+/// Smallest selection probability of a light that emits, as a fraction of
+/// 1/N (N lights): `MIN_SELECTION / N`.
+pub const MIN_SELECTION: f64 = 1e-3;
+
+/// Light selection probabilities, proportional to emitted power, with every
+/// light of positive power selected with probability at least
+/// `MIN_SELECTION / N`.
+///
+/// Without the floor a light 10⁸ dimmer than another got a probability of
+/// 10⁻⁸, below the f32 resolution of the cumulative table near 1 (6·10⁻⁸):
+/// it was never picked, so a dim point light (which only next-event
+/// estimation can find) contributed nothing at all — a bias, not noise.
+///
+/// When every light is above the floor the probabilities are the f32
+/// power shares as before (shipped scenes keep bit-identical images);
+/// otherwise each share is max(P/ΣP, floor), computed in f64 and
+/// renormalised. A light of zero power is never picked (it adds nothing).
+/// The cumulative table then resolves each step (≥ 10⁻³/N ≫ 6·10⁻⁸ for
+/// N < 10⁴ lights).
+pub fn selection_pmf(power: &[f32]) -> Vec<f32> {
+    let n = power.len();
+    let total: f32 = power.iter().map(|p| p.max(0.0)).sum();
+    if !(total > 0.0 && total.is_finite()) {
+        return vec![1.0 / n.max(1) as f32; n];
+    }
+    let floor = MIN_SELECTION / n as f64;
+    let total64: f64 = power.iter().map(|&p| p.max(0.0) as f64).sum();
+    let share = |p: f32| p.max(0.0) as f64 / total64;
+    if power.iter().all(|&p| !(p > 0.0) || share(p) >= floor) {
+        return power.iter().map(|p| p.max(0.0) / total).collect();
+    }
+    let q: Vec<f64> = power
+        .iter()
+        .map(|&p| if p > 0.0 { share(p).max(floor) } else { 0.0 })
+        .collect();
+    let sum: f64 = q.iter().sum();
+    q.iter().map(|&x| (x / sum) as f32).collect()
 }
 
 /// pbrt-v4 spot fall-off: smoothstep between the cone and the fall-off start.
