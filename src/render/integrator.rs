@@ -43,6 +43,7 @@ pub struct FirstHit {
     pub object: u32,
 }
 
+#[inline(always)]
 pub fn first_hit(world: &World, o: Vec3, d: Vec3) -> Option<FirstHit> {
     world
         .accel
@@ -56,7 +57,7 @@ pub fn first_hit(world: &World, o: Vec3, d: Vec3) -> Option<FirstHit> {
 /// Largest band value (at least 0), four bands at a time. For finite values
 /// the same as folding with `f32::max`; a NaN band may be ignored or returned
 /// (either way the path's non-finite result is counted and dropped).
-#[inline]
+#[inline(always)]
 fn max_band(v: &[f32]) -> f32 {
     let mut acc = f32x4::ZERO;
     let mut chunks = v.chunks_exact(4);
@@ -71,7 +72,7 @@ fn max_band(v: &[f32]) -> f32 {
     m
 }
 
-#[inline]
+#[inline(always)]
 fn add_scaled(l: &mut [f32], beta: &[f32], e: &[f32], s: f32) {
     for ((o, &b), &x) in l.iter_mut().zip(beta).zip(e) {
         *o += b * x * s;
@@ -81,6 +82,7 @@ fn add_scaled(l: &mut [f32], beta: &[f32], e: &[f32], s: f32) {
 /// Trace one path. On entry `sc.beta` holds the initial throughput (1 for all
 /// bands, or one-hot for a hero camera sample with `hero = Some(band)`).
 /// On return `sc.l` holds the radiance estimate.
+#[inline(always)]
 pub fn trace(
     world: &World,
     mut o: Vec3,

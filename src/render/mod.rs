@@ -65,6 +65,7 @@ pub mod geometry;
 pub mod integrator;
 pub mod output;
 pub mod sampling;
+pub mod simd;
 pub mod world;
 
 use crate::Result;

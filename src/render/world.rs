@@ -459,7 +459,7 @@ impl World {
 
     /// Surface point, error bound and geometric normal of a hit on primitive
     /// `prim` (`Shape::surface` with the triangle normal precomputed).
-    #[inline]
+    #[inline(always)]
     pub fn surface(&self, prim: u32, o: Vec3, d: Vec3, h: &PrimHit) -> (Vec3, Vec3, Vec3) {
         match self.accel.shapes[prim as usize] {
             Shape::Triangle { p } => {
@@ -473,6 +473,7 @@ impl World {
     /// Pick a light and sample a direction to it from point `p`. The sample
     /// references the light's spectrum: radiance arriving at `p` (unoccluded)
     /// is `scale · spec`.
+    #[inline(always)]
     pub fn sample_light(&self, p: Vec3, u0: f32, u1: f32, u2: f32) -> Option<LightSample<'_>> {
         if self.lights.is_empty() {
             return None;
@@ -609,7 +610,7 @@ impl World {
 
     /// Solid-angle pdf with which `sample_light` would have produced the hit
     /// on area light `light` at distance `dist` with cosine `cos_l` there.
-    #[inline]
+    #[inline(always)]
     pub fn area_light_pdf(&self, light: u32, dist: f32, cos_l: f32) -> f32 {
         let LightKind::Area { area, .. } = self.lights[light as usize] else {
             return 0.0;
@@ -658,6 +659,7 @@ pub fn selection_pmf(power: &[f32]) -> Vec<f32> {
 }
 
 /// pbrt-v4 spot fall-off: smoothstep between the cone and the fall-off start.
+#[inline(always)]
 fn smooth_falloff(cos: f32, cos_total: f32, cos_start: f32) -> f32 {
     if cos >= cos_start {
         return 1.0;
