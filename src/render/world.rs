@@ -1,6 +1,7 @@
 //! The render-ready world: shapes in a BVH, per-primitive material / object /
 //! light ids, BSDFs and light spectra resampled onto the wavelength grid, and
-//! the light-selection distribution (proportional to emitted power).
+//! the light-selection distribution (proportional to emitted power, with a
+//! floor: `selection_pmf`).
 //!
 //! Instances are flattened into world-space triangles. A mesh referenced by any
 //! instance is treated as a prototype only and is not rendered by itself.
