@@ -130,6 +130,8 @@ def mitsuba_reference(mi, dr, scene, spp, batches, pass_spp, cache):
 
 # The machine as camsim's `bench render` reports it ("cpu: MODEL (VECTOR WIDTH)").
 CAMSIM_CPU = []
+# The render kernel level camsim ran (`render_isa=` of its bench line; CAMSIM_RENDER_ISA lowers it).
+CAMSIM_ISA = []
 
 
 def machine_cpu():
@@ -153,6 +155,7 @@ def run_camsim(camsim, spp, seed, y_out, threads):
     CAMSIM_CPU.extend(line[len("cpu: "):] for line in out.splitlines() if line.startswith("cpu: "))
     kv_line = [line for line in out.splitlines() if line.startswith("camsim-bench ")][-1]
     kv = dict(re.findall(r"(\w+)=(\S+)", kv_line))
+    CAMSIM_ISA.append(kv.get("render_isa", "?"))
     return read_pfm(y_out), float(kv["wall_s"]), float(kv["cpu_s"])
 
 
@@ -294,7 +297,7 @@ def main():
     print(f"RATIO camsim/Mitsuba: paths/s {pps_c / (paths / tm):.3f} (wall), {cm / cc:.3f} (CPU); "
           f"equal-time RMSE {res[k_all][1]:.3f} (wall), {res[k_all][2]:.3f} (CPU); "
           f"light transport only {res[k_lt][1]:.3f} (wall); equal-spp RMSE {res[k_all][0]:.3f}  [RMSE < 1 = camsim better]; "
-          f"CPU {machine_cpu()}, load {os.getloadavg()[0]:.1f}")
+          f"CPU {machine_cpu()}, camsim kernel {CAMSIM_ISA[-1] if CAMSIM_ISA else '?'}, load {os.getloadavg()[0]:.1f}")
     with open(os.path.join(a.cache, "last_result.json"), "w") as f:
         json.dump({"load_average": os.getloadavg()[0], "cpu": machine_cpu(),
                    "mitsuba": {"variant": variant, "spp": a.spp, "wall_s": tm, "cpu_s": cm, "rel_rmse": rm},

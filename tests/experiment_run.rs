@@ -155,6 +155,11 @@ fn d65_chromaticity_through_the_runner() {
         serde_json::from_slice(&std::fs::read(out.join("d65/manifest.json")).unwrap()).unwrap();
     assert!(m["git_commit"].as_str().is_some());
     assert_eq!(m["camsim_version"], env!("CARGO_PKG_VERSION"));
+    // the render kernel's instruction set level (issue 17)
+    assert_eq!(
+        m["render_isa"],
+        camsim::render::simd::RenderIsa::detect().name()
+    );
 }
 
 /// Drop the timing columns (render_s, total_s), which differ between runs.

@@ -43,6 +43,13 @@ fn bench_scene_mean_luminance_matches_mitsuba() {
     // the machine beside the speed (issue 17): "cpu: MODEL (VECTOR WIDTH)"
     let cpu = format!("cpu: {}", camsim::machine::cpu());
     assert!(stdout.lines().any(|l| l == cpu), "{cpu} not in {stdout}");
+    // and the render kernel's instruction set level (issue 17 item 2)
+    let isa = camsim::render::simd::RenderIsa::detect().name();
+    assert!(
+        stdout.lines().any(|l| l == format!("render kernel: {isa}"))
+            && stdout.contains(&format!(" render_isa={isa}")),
+        "{isa} not in {stdout}"
+    );
     let m = read_pfm_mean(&y);
     assert!((m / 0.15380 - 1.0).abs() < 0.02, "mean Y {m}");
 
@@ -73,4 +80,33 @@ fn bench_render_rejects_bad_options_with_named_files() {
         .unwrap();
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--bvh 'octree'"));
+}
+
+/// `CAMSIM_RENDER_ISA` lowers the render kernel's level (sse runs on every
+/// x86-64) and an unknown value is ignored with a warning naming the choices.
+#[test]
+fn render_isa_environment_variable_lowers_the_kernel() {
+    let out = bench_1spp()
+        .args(["--ref-spp", "0", "--threads", "2"])
+        .env("CAMSIM_RENDER_ISA", "sse")
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}");
+    assert!(stdout.contains("render kernel: sse\n"), "{stdout}");
+    assert!(stdout.contains(" render_isa=sse"), "{stdout}");
+
+    let out = bench_1spp()
+        .args(["--ref-spp", "0", "--threads", "2"])
+        .env("CAMSIM_RENDER_ISA", "avx1024")
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("CAMSIM_RENDER_ISA=\"avx1024\" ignored (expected sse, avx2 or avx512)"),
+        "{err}"
+    );
+    let isa = camsim::render::simd::RenderIsa::detect().name();
+    assert!(String::from_utf8_lossy(&out.stdout).contains(&format!("render kernel: {isa}\n")));
 }

@@ -137,6 +137,11 @@ pub struct Manifest {
     /// empty in manifests written before it was recorded.
     #[serde(default)]
     pub cpu: String,
+    /// The instruction set level the path tracer's kernel ran with
+    /// (`render::simd::RenderIsa`: sse, avx2+fma or avx512f; `CAMSIM_RENDER_ISA`
+    /// lowers it); empty in manifests written before it was recorded.
+    #[serde(default)]
+    pub render_isa: String,
     /// `[i, n]` for a shard run.
     pub shard: Option<[usize; 2]>,
     pub axes: Vec<String>,
@@ -166,6 +171,7 @@ impl Manifest {
             git_dirty,
             threads,
             cpu: crate::machine::cpu().to_string(),
+            render_isa: crate::render::simd::RenderIsa::detect().name().to_string(),
             shard: shard.map(|(i, n)| [i, n]),
             axes: plan.axes.clone(),
             quality: plan.quality.clone(),

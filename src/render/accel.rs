@@ -63,7 +63,7 @@ impl Accel {
     }
 
     /// Closest hit along `o + t·d`, t ∈ (0, tmax).
-    #[inline]
+    #[inline(always)]
     pub fn intersect(&self, o: Vec3, d: Vec3, tmax: f32) -> Option<Hit> {
         if let Tree::Four(b) = &self.tree {
             return b
@@ -106,7 +106,7 @@ impl Accel {
     }
 
     /// True when nothing blocks `o + t·d` for t ∈ (0, tmax).
-    #[inline]
+    #[inline(always)]
     pub fn unoccluded(&self, o: Vec3, d: Vec3, tmax: f32) -> bool {
         if let Tree::Four(b) = &self.tree {
             return b.unoccluded(&self.shapes, o, d, tmax);

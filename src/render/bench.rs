@@ -522,8 +522,10 @@ pub fn run(o: &BenchOptions) -> Result<String> {
     }
     let (timed, cpu) = timed.expect("rendered");
     let y = luminance_y(&timed);
+    let isa = super::simd::RenderIsa::detect().name();
+    out += &format!("render kernel: {isa}\n");
     let mut kv = format!(
-        "camsim-bench spp={} wall_s={:.4} cpu_s={:.4} paths_per_s={:.1} mean_y={:.6}",
+        "camsim-bench spp={} wall_s={:.4} cpu_s={:.4} paths_per_s={:.1} mean_y={:.6} render_isa={isa}",
         o.spp,
         timed.render_s,
         cpu,

@@ -59,7 +59,7 @@ pub struct BsdfSample {
 /// still sampled as a (very sharp) microfacet lobe to keep MIS finite.
 const MIN_ALPHA: f32 = 1e-3;
 
-#[inline]
+#[inline(always)]
 fn ggx_d(h: Vec3, alpha: f32) -> f32 {
     let c2 = h.z * h.z;
     let a2 = alpha * alpha;
@@ -68,7 +68,7 @@ fn ggx_d(h: Vec3, alpha: f32) -> f32 {
     let den = c2 * a2 + (h.x * h.x + h.y * h.y);
     a2 / (PI * den * den)
 }
-#[inline]
+#[inline(always)]
 fn smith_g1(w: Vec3, alpha: f32) -> f32 {
     let c2 = w.z * w.z;
     if c2 <= 0.0 {
@@ -77,7 +77,7 @@ fn smith_g1(w: Vec3, alpha: f32) -> f32 {
     let t2 = (1.0 - c2).max(0.0) / c2;
     2.0 / (1.0 + (1.0 + alpha * alpha * t2).sqrt())
 }
-#[inline]
+#[inline(always)]
 fn ggx_sample_h(alpha: f32, u: f32, v: f32) -> Vec3 {
     let t2 = alpha * alpha * u / (1.0 - u).max(1e-12);
     let cos = 1.0 / (1.0 + t2).sqrt();
@@ -88,7 +88,7 @@ fn ggx_sample_h(alpha: f32, u: f32, v: f32) -> Vec3 {
 
 /// Unpolarised Fresnel reflectance of a dielectric interface; `eta` = η_t/η_i,
 /// `cos_i` ≥ 0 on the incident side.
-#[inline]
+#[inline(always)]
 pub fn fresnel_dielectric(cos_i: f32, eta: f32) -> f32 {
     let cos_i = cos_i.clamp(0.0, 1.0);
     let sin2_t = (1.0 - cos_i * cos_i) / (eta * eta);
@@ -102,7 +102,7 @@ pub fn fresnel_dielectric(cos_i: f32, eta: f32) -> f32 {
 }
 
 /// Unpolarised Fresnel reflectance of a conductor with complex index η + ik.
-#[inline]
+#[inline(always)]
 pub fn fresnel_conductor(cos_i: f32, eta: f32, k: f32) -> f32 {
     let c = cos_i.clamp(0.0, 1.0) as f64;
     let (eta, k) = (eta as f64, k as f64);
@@ -174,6 +174,7 @@ impl Bsdf {
     }
 
     /// True when the BSDF has only delta lobes (NEE is pointless).
+    #[inline(always)]
     pub fn is_delta(&self) -> bool {
         match self {
             Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } => true,
@@ -181,13 +182,16 @@ impl Bsdf {
             _ => false,
         }
     }
+    #[inline(always)]
     pub fn is_black(&self) -> bool {
         matches!(self, Bsdf::Black)
     }
     /// True for materials that transmit (the shading frame must not be flipped).
+    #[inline(always)]
     pub fn is_transmissive(&self) -> bool {
         matches!(self, Bsdf::Dielectric { .. })
     }
+    #[inline(always)]
     pub fn is_dispersive(&self) -> bool {
         matches!(
             self,
@@ -200,6 +204,7 @@ impl Bsdf {
 
     /// Evaluate f(wo, wi) into `f` (no cosine) and return the sampling pdf of wi.
     /// Both directions local, wo.z > 0 (reflection-only materials).
+    #[inline(always)]
     pub fn eval(&self, wo: Vec3, wi: Vec3, f: &mut [f32]) -> f32 {
         if wo.z <= 0.0 || wi.z <= 0.0 {
             f.iter_mut().for_each(|x| *x = 0.0);
@@ -249,6 +254,7 @@ impl Bsdf {
 
     /// Sample wi given wo (local). Writes f·|cos|/pdf into `w`. For the
     /// dielectric, wo.z may be negative (inside); elsewhere wo.z > 0.
+    #[inline(always)]
     pub fn sample(
         &self,
         wo: Vec3,

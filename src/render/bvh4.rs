@@ -344,7 +344,7 @@ impl Bvh4 {
     }
 
     /// Closest hit along `o + t·d`, t ∈ (0, tmax).
-    #[inline]
+    #[inline(always)]
     pub fn intersect(
         &self,
         shapes: &[Shape],
@@ -451,7 +451,7 @@ impl Bvh4 {
     }
 
     /// True when nothing blocks `o + t·d` for t ∈ (0, tmax).
-    #[inline]
+    #[inline(always)]
     pub fn unoccluded(&self, shapes: &[Shape], o: glam::Vec3, d: glam::Vec3, tmax: f32) -> bool {
         let r = RayPre::new(o, d);
         let mut stack = [const { MaybeUninit::<u32>::uninit() }; STACK];

@@ -4,6 +4,7 @@
 use super::RenderSettings;
 use super::integrator::{Scratch, first_hit, trace};
 use super::sampling::Rng;
+use super::simd::RenderIsa;
 use super::world::World;
 use crate::optical_image::{OpticalImage, Rect};
 use crate::optics::Camera;
@@ -19,7 +20,7 @@ type RowSlices<'a> = (
 );
 
 /// World-space ray for a film point (None: vignetted).
-#[inline]
+#[inline(always)]
 fn camera_ray(
     camera: &dyn Camera,
     to_world: &DMat4,
@@ -47,6 +48,7 @@ fn camera_ray(
 /// pixel (unbiased), no two share a cell (stratified), and batches draw
 /// independent permutations (their means stay independent for the standard
 /// error). Returns m; `cells[..n]` holds the cell indices (x = c % m, y = c / m).
+#[inline(always)]
 fn stratify(cells: &mut Vec<u32>, seed: u64, pixel: u64, batch: u64, n: usize) -> u32 {
     let mut m = (n as f64).sqrt() as u32;
     while (m as usize) * (m as usize) < n {
@@ -65,8 +67,25 @@ fn stratify(cells: &mut Vec<u32>, seed: u64, pixel: u64, batch: u64, n: usize) -
     m
 }
 
-/// Render a window of the film. See `render` for the contract.
+/// Render a window of the film. See `render` for the contract. The kernel
+/// runs at the widest instruction set level of this machine
+/// (`RenderIsa::detect`).
 pub fn render_world(
+    world: &World,
+    camera: &dyn Camera,
+    to_world: &DMat4,
+    film: &FilmSpec,
+    s: &RenderSettings,
+    label_names: Vec<String>,
+) -> Result<OpticalImage> {
+    let isa = RenderIsa::detect();
+    render_world_at(isa, world, camera, to_world, film, s, label_names)
+}
+
+/// `render_world` with the kernel compiled for `isa` (the baseline when
+/// this CPU lacks it).
+pub fn render_world_at(
+    isa: RenderIsa,
     world: &World,
     camera: &dyn Camera,
     to_world: &DMat4,
@@ -117,11 +136,6 @@ pub fn render_world(
     img.spp = s.spp;
     let dispersive_cam = camera.is_dispersive();
     let mid_nm = grid.wavelength(nb / 2);
-    let (fw, fh, pitch) = (
-        film.width_px as f64,
-        film.height_px as f64,
-        film.pixel_pitch_m,
-    );
     let row_len = roi.w as usize * nb;
 
     // Standard errors of weighted band sums (e.g. a sensor channel's electron
@@ -138,8 +152,116 @@ pub fn render_world(
             "stderr weights must have one value per band ({nb})"
         )));
     }
-    let nsets = wsets.len();
-    let work = |((((row, irr), se), lab), dep): RowSlices| -> (u64, Vec<f32>) {
+    let job = RowJob {
+        world,
+        camera,
+        to_world,
+        film,
+        s,
+        roi,
+        batches,
+        dispersive_cam,
+        mid_nm,
+        wsets: &wsets,
+    };
+    let work = |r: RowSlices| job.row_at(isa, r);
+
+    let run = |img: &mut OpticalImage| -> Vec<(u64, Vec<f32>)> {
+        img.irradiance
+            .par_chunks_mut(row_len)
+            .enumerate()
+            .zip(img.stderr.par_chunks_mut(row_len))
+            .zip(img.labels.par_chunks_mut(roi.w as usize))
+            .zip(img.depth_m.par_chunks_mut(roi.w as usize))
+            .map(work)
+            .collect::<Vec<_>>()
+    };
+    let rows = if s.threads > 0 {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(s.threads)
+            .build()
+            .map_err(|e| Error::invalid(format!("thread pool: {e}")))?;
+        pool.install(|| run(&mut img))
+    } else {
+        run(&mut img)
+    };
+    let nan = rows.iter().map(|r| r.0).sum();
+    if !wsets.is_empty() && batches > 1 {
+        img.weighted_stderr = rows.into_iter().flat_map(|r| r.1).collect();
+    }
+    img.nan_count = nan;
+    img.render_s = start.elapsed().as_secs_f64();
+    Ok(img)
+}
+
+/// What every row of one render shares.
+struct RowJob<'a> {
+    world: &'a World,
+    camera: &'a dyn Camera,
+    to_world: &'a DMat4,
+    film: &'a FilmSpec,
+    s: &'a RenderSettings,
+    roi: Rect,
+    batches: usize,
+    dispersive_cam: bool,
+    mid_nm: f64,
+    wsets: &'a [&'a [f32]],
+}
+
+impl RowJob<'_> {
+    /// Render one row with the kernel compiled for `isa` (`simd.rs`).
+    fn row_at(&self, isa: RenderIsa, r: RowSlices) -> (u64, Vec<f32>) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            match isa {
+                // SAFETY: the CPU supports the features the copy is built for.
+                RenderIsa::Avx512 if isa.supported() => return unsafe { self.row_avx512(r) },
+                // SAFETY: as above.
+                RenderIsa::Avx2 if isa.supported() => return unsafe { self.row_avx2(r) },
+                _ => {}
+            }
+        }
+        let _ = isa;
+        self.row(r)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
+    unsafe fn row_avx2(&self, r: RowSlices) -> (u64, Vec<f32>) {
+        self.row(r)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512dq,avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
+    unsafe fn row_avx512(&self, r: RowSlices) -> (u64, Vec<f32>) {
+        self.row(r)
+    }
+
+    /// One image row: every sample of every pixel, then the pixel means and
+    /// standard errors. Returns the non-finite sample count and the weighted
+    /// standard errors.
+    #[inline(always)]
+    fn row(&self, ((((row, irr), se), lab), dep): RowSlices) -> (u64, Vec<f32>) {
+        let RowJob {
+            world,
+            camera,
+            to_world,
+            film,
+            s,
+            roi,
+            batches,
+            dispersive_cam,
+            mid_nm,
+            wsets,
+        } = *self;
+        let nb = world.bands;
+        let grid = &s.grid;
+        let nsets = wsets.len();
+        let (fw, fh, pitch) = (
+            film.width_px as f64,
+            film.height_px as f64,
+            film.pixel_pitch_m,
+        );
         let mut wse = vec![
             0f32;
             if batches > 1 {
@@ -268,32 +390,50 @@ pub fn render_world(
             }
         }
         (nan, wse)
-    };
-
-    let run = |img: &mut OpticalImage| -> Vec<(u64, Vec<f32>)> {
-        img.irradiance
-            .par_chunks_mut(row_len)
-            .enumerate()
-            .zip(img.stderr.par_chunks_mut(row_len))
-            .zip(img.labels.par_chunks_mut(roi.w as usize))
-            .zip(img.depth_m.par_chunks_mut(roi.w as usize))
-            .map(work)
-            .collect::<Vec<_>>()
-    };
-    let rows = if s.threads > 0 {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(s.threads)
-            .build()
-            .map_err(|e| Error::invalid(format!("thread pool: {e}")))?;
-        pool.install(|| run(&mut img))
-    } else {
-        run(&mut img)
-    };
-    let nan = rows.iter().map(|r| r.0).sum();
-    if nsets > 0 && batches > 1 {
-        img.weighted_stderr = rows.into_iter().flat_map(|r| r.1).collect();
     }
-    img.nan_count = nan;
-    img.render_s = start.elapsed().as_secs_f64();
-    Ok(img)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::optics::pinhole::Pinhole;
+    use crate::render::BvhKind;
+    use crate::render::bench::mitsuba_cornell_box;
+
+    /// Every instruction set level this machine has renders the same image
+    /// bit for bit (irradiance, standard errors, labels, depth): the levels
+    /// do the same IEEE operations in the same order (`simd.rs`). The
+    /// Cornell box exercises diffuse and area-light paths, roulette and MIS.
+    #[test]
+    fn every_isa_level_renders_the_same_bits() {
+        let (scene, film) = mitsuba_cornell_box();
+        let cam = Pinhole::new(39.3077, 1.0, &film).unwrap();
+        let to_world = scene.camera.as_ref().map(|c| c.to_world).unwrap();
+        let s = RenderSettings {
+            spp: 8,
+            threads: 2,
+            roi: Some(Rect::new(96, 16, 48, 48)),
+            ..Default::default()
+        };
+        let world = World::build(&scene, &s.grid, BvhKind::Bvh4).unwrap();
+        let levels: Vec<RenderIsa> = RenderIsa::ALL
+            .into_iter()
+            .filter(|l| l.supported())
+            .collect();
+        let imgs: Vec<OpticalImage> = levels
+            .iter()
+            .map(|&l| render_world_at(l, &world, &cam, &to_world, &film, &s, vec![]).unwrap())
+            .collect();
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert!(imgs[0].irradiance.iter().any(|&x| x > 0.0));
+        for (l, img) in levels.iter().zip(&imgs).skip(1) {
+            assert!(
+                bits(&img.irradiance) == bits(&imgs[0].irradiance),
+                "{l:?} irradiance"
+            );
+            assert!(bits(&img.stderr) == bits(&imgs[0].stderr), "{l:?} stderr");
+            assert_eq!(img.labels, imgs[0].labels, "{l:?}");
+            assert!(bits(&img.depth_m) == bits(&imgs[0].depth_m), "{l:?} depth");
+        }
+    }
 }

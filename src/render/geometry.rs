@@ -35,7 +35,7 @@ use obvhs::{Boundable, aabb::Aabb};
 const EPS32: f32 = f32::EPSILON * 0.5;
 
 /// pbrt's γ(n) = nε/(1−nε) for f32.
-#[inline]
+#[inline(always)]
 pub fn gamma(n: i32) -> f32 {
     let ne = n as f32 * EPS32;
     ne / (1.0 - ne)
@@ -222,7 +222,7 @@ pub fn intersect_triangle_pre(r: &TriRay, tmax: f32, p: &[Vec3; 3]) -> Option<Pr
 }
 
 /// Ray–sphere in f64 (robust quadratic). `d` need not be unit length.
-#[inline]
+#[inline(always)]
 pub fn intersect_sphere(o: Vec3, d: Vec3, tmax: f32, center: Vec3, radius: f32) -> Option<PrimHit> {
     let oc = o.as_dvec3() - center.as_dvec3();
     let dd = d.as_dvec3();
@@ -263,7 +263,7 @@ pub fn intersect_sphere(o: Vec3, d: Vec3, tmax: f32, center: Vec3, radius: f32) 
 }
 
 /// Ray–disk in f64. `d` need not be unit length.
-#[inline]
+#[inline(always)]
 pub fn intersect_disk(
     o: Vec3,
     d: Vec3,
@@ -317,6 +317,7 @@ impl Shape {
     }
 
     /// Surface point, its error bound and the geometric normal for a hit.
+    #[inline(always)]
     pub fn surface(&self, o: Vec3, d: Vec3, h: &PrimHit) -> (Vec3, Vec3, Vec3) {
         match *self {
             Shape::Triangle { p } => {
@@ -361,11 +362,11 @@ pub fn triangle_point(p: &[Vec3; 3], b: [f32; 3], n: i32) -> (Vec3, Vec3) {
 }
 
 /// Next representable f32 towards +inf / −inf.
-#[inline]
+#[inline(always)]
 fn next_up(x: f32) -> f32 {
     x.next_up()
 }
-#[inline]
+#[inline(always)]
 fn next_down(x: f32) -> f32 {
     x.next_down()
 }

@@ -29,6 +29,11 @@
 //!   Mitsuba's `max_depth = d` equals `max_bounces = d − 1`. Russian roulette
 //!   starts after the second bounce with survival probability
 //!   min(1, max-band throughput).
+//! - Instruction set: the row kernel runs at the widest level of the CPU
+//!   (`simd::RenderIsa`: sse, avx2+fma, avx512f; `CAMSIM_RENDER_ISA` lowers
+//!   it), with the same bits at every level.
+//! - Light selection: proportional to power, each emitting light at least
+//!   10⁻³/N (`world::selection_pmf`).
 //! - Performance (`bench/mitsuba_compare.sh`: Mitsuba `cornell_box()`, 256²,
 //!   max_depth 7 = max_bounces 6, 2 threads, CIE Y against one converged
 //!   Mitsuba reference, box filter, 4 seeds; 2026-11-23, idle 2-core machine):
@@ -65,6 +70,7 @@ pub mod geometry;
 pub mod integrator;
 pub mod output;
 pub mod sampling;
+pub mod simd;
 pub mod world;
 
 use crate::Result;

@@ -25,6 +25,7 @@ pub struct Rng {
 
 impl Rng {
     /// Independent stream for one pixel sample.
+    #[inline(always)]
     pub fn for_sample(seed: u64, pixel: u64, sample: u64) -> Self {
         let a = mix64(seed ^ mix64(pixel.wrapping_mul(0xD1B5_4A32_D192_ED03)));
         let b = mix64(a ^ sample.wrapping_mul(0x8CB9_2BA7_2F3D_8DD7));
@@ -37,7 +38,7 @@ impl Rng {
         r.next_u32();
         r
     }
-    #[inline]
+    #[inline(always)]
     pub fn next_u32(&mut self) -> u32 {
         let old = self.state;
         self.state = old
@@ -48,11 +49,11 @@ impl Rng {
         xorshifted.rotate_right(rot)
     }
     /// Uniform in [0, 1).
-    #[inline]
+    #[inline(always)]
     pub fn uniform(&mut self) -> f32 {
         (self.next_u32() >> 8) as f32 * (1.0 / 16_777_216.0)
     }
-    #[inline]
+    #[inline(always)]
     pub fn uniform2(&mut self) -> (f32, f32) {
         (self.uniform(), self.uniform())
     }
@@ -67,7 +68,7 @@ pub struct Frame {
 }
 
 impl Frame {
-    #[inline]
+    #[inline(always)]
     pub fn from_normal(n: Vec3) -> Self {
         let sign = 1.0f32.copysign(n.z);
         let a = -1.0 / (sign + n.z);
@@ -76,18 +77,18 @@ impl Frame {
         let t = Vec3::new(b, sign + n.y * n.y * a, -n.y);
         Frame { s, t, n }
     }
-    #[inline]
+    #[inline(always)]
     pub fn to_local(&self, v: Vec3) -> Vec3 {
         Vec3::new(v.dot(self.s), v.dot(self.t), v.dot(self.n))
     }
-    #[inline]
+    #[inline(always)]
     pub fn to_world(&self, v: Vec3) -> Vec3 {
         self.s * v.x + self.t * v.y + self.n * v.z
     }
 }
 
 /// Concentric map of the unit square to the unit disk.
-#[inline]
+#[inline(always)]
 pub fn square_to_disk(u: f32, v: f32) -> (f32, f32) {
     let a = 2.0 * u - 1.0;
     let b = 2.0 * v - 1.0;
@@ -109,7 +110,7 @@ pub fn square_to_disk(u: f32, v: f32) -> (f32, f32) {
 /// truncation error ≤ (π/4)¹¹/11! ≈ 2e-9 and (π/4)¹⁰/10! ≈ 2.5e-8, below
 /// f32 rounding (6e-8), and several times cheaper than a libm sincosf call on
 /// the renderer's hottest sampling path.
-#[inline]
+#[inline(always)]
 pub fn sin_cos_quarter(x: f32) -> (f32, f32) {
     let x2 = x * x;
     let s = x
@@ -121,7 +122,7 @@ pub fn sin_cos_quarter(x: f32) -> (f32, f32) {
 }
 
 /// Cosine-weighted hemisphere around +z; pdf = cosθ/π.
-#[inline]
+#[inline(always)]
 pub fn cosine_hemisphere(u: f32, v: f32) -> Vec3 {
     let (x, y) = square_to_disk(u, v);
     let z = (1.0 - x * x - y * y).max(0.0).sqrt();
@@ -129,7 +130,7 @@ pub fn cosine_hemisphere(u: f32, v: f32) -> Vec3 {
 }
 
 /// Uniform direction on the unit sphere; pdf = 1/(4π).
-#[inline]
+#[inline(always)]
 pub fn uniform_sphere(u: f32, v: f32) -> Vec3 {
     let z = 1.0 - 2.0 * u;
     let r = (1.0 - z * z).max(0.0).sqrt();
@@ -139,7 +140,7 @@ pub fn uniform_sphere(u: f32, v: f32) -> Vec3 {
 
 /// Uniform barycentrics on a triangle (Heitz's low-distortion map is not needed
 /// here; this is the classic square-root map). Returns (b0, b1, b2).
-#[inline]
+#[inline(always)]
 pub fn uniform_triangle(u: f32, v: f32) -> (f32, f32, f32) {
     let su = u.sqrt();
     let b0 = 1.0 - su;
@@ -149,6 +150,7 @@ pub fn uniform_triangle(u: f32, v: f32) -> (f32, f32, f32) {
 
 /// Sample an index from a cumulative table (last entry = 1): the first entry
 /// above `u`.
+#[inline(always)]
 pub fn sample_cdf(cdf: &[f32], u: f32) -> usize {
     // The first entry above u; a linear scan for the few lights of most
     // scenes (the same index as the binary search, without its mispredicts).
@@ -161,7 +163,7 @@ pub fn sample_cdf(cdf: &[f32], u: f32) -> usize {
 }
 
 /// Power heuristic (β = 2) for two strategies with one sample each.
-#[inline]
+#[inline(always)]
 pub fn power_heuristic(pdf_a: f32, pdf_b: f32) -> f32 {
     let a = pdf_a * pdf_a;
     let b = pdf_b * pdf_b;

@@ -1,6 +1,7 @@
 //! The render-ready world: shapes in a BVH, per-primitive material / object /
 //! light ids, BSDFs and light spectra resampled onto the wavelength grid, and
-//! the light-selection distribution (proportional to emitted power).
+//! the light-selection distribution (proportional to emitted power, with a
+//! floor: `selection_pmf`).
 //!
 //! Instances are flattened into world-space triangles. A mesh referenced by any
 //! instance is treated as a prototype only and is not rendered by itself.
@@ -406,12 +407,7 @@ impl World {
                 }
             }
         }
-        let total: f32 = power.iter().map(|p| p.max(0.0)).sum();
-        let light_pmf: Vec<f32> = if total > 0.0 && total.is_finite() {
-            power.iter().map(|p| p.max(0.0) / total).collect()
-        } else {
-            vec![1.0 / power.len().max(1) as f32; power.len()]
-        };
+        let light_pmf = selection_pmf(&power);
         let mut acc = 0.0;
         let mut light_cdf: Vec<f32> = light_pmf
             .iter()
@@ -464,7 +460,7 @@ impl World {
 
     /// Surface point, error bound and geometric normal of a hit on primitive
     /// `prim` (`Shape::surface` with the triangle normal precomputed).
-    #[inline]
+    #[inline(always)]
     pub fn surface(&self, prim: u32, o: Vec3, d: Vec3, h: &PrimHit) -> (Vec3, Vec3, Vec3) {
         match self.accel.shapes[prim as usize] {
             Shape::Triangle { p } => {
@@ -478,6 +474,7 @@ impl World {
     /// Pick a light and sample a direction to it from point `p`. The sample
     /// references the light's spectrum: radiance arriving at `p` (unoccluded)
     /// is `scale · spec`.
+    #[inline(always)]
     pub fn sample_light(&self, p: Vec3, u0: f32, u1: f32, u2: f32) -> Option<LightSample<'_>> {
         if self.lights.is_empty() {
             return None;
@@ -614,7 +611,7 @@ impl World {
 
     /// Solid-angle pdf with which `sample_light` would have produced the hit
     /// on area light `light` at distance `dist` with cosine `cos_l` there.
-    #[inline]
+    #[inline(always)]
     pub fn area_light_pdf(&self, light: u32, dist: f32, cos_l: f32) -> f32 {
         let LightKind::Area { area, .. } = self.lights[light as usize] else {
             return 0.0;
@@ -623,7 +620,47 @@ impl World {
     }
 }
 
+/// Smallest selection probability of a light that emits, as a fraction of
+/// 1/N (N lights): `MIN_SELECTION / N`.
+pub const MIN_SELECTION: f64 = 1e-3;
+
+/// Light selection probabilities, proportional to emitted power, with every
+/// light of positive power selected with probability at least
+/// `MIN_SELECTION / N`.
+///
+/// Without the floor a light 10⁸ dimmer than another got a probability of
+/// 10⁻⁸, below the f32 resolution of the cumulative table near 1 (6·10⁻⁸):
+/// it was never picked, so a dim point light (which only next-event
+/// estimation can find) contributed nothing at all — a bias, not noise.
+///
+/// When every light is above the floor the probabilities are the f32
+/// power shares as before (shipped scenes keep bit-identical images);
+/// otherwise each share is max(P/ΣP, floor), computed in f64 and
+/// renormalised. A light of zero power is never picked (it adds nothing).
+/// The cumulative table then resolves each step (≥ 10⁻³/N ≫ 6·10⁻⁸ for
+/// N < 10⁴ lights).
+pub fn selection_pmf(power: &[f32]) -> Vec<f32> {
+    let n = power.len();
+    let total: f32 = power.iter().map(|p| p.max(0.0)).sum();
+    if !(total > 0.0 && total.is_finite()) {
+        return vec![1.0 / n.max(1) as f32; n];
+    }
+    let floor = MIN_SELECTION / n as f64;
+    let total64: f64 = power.iter().map(|&p| p.max(0.0) as f64).sum();
+    let share = |p: f32| p.max(0.0) as f64 / total64;
+    if power.iter().all(|&p| !(p > 0.0) || share(p) >= floor) {
+        return power.iter().map(|p| p.max(0.0) / total).collect();
+    }
+    let q: Vec<f64> = power
+        .iter()
+        .map(|&p| if p > 0.0 { share(p).max(floor) } else { 0.0 })
+        .collect();
+    let sum: f64 = q.iter().sum();
+    q.iter().map(|&x| (x / sum) as f32).collect()
+}
+
 /// pbrt-v4 spot fall-off: smoothstep between the cone and the fall-off start.
+#[inline(always)]
 fn smooth_falloff(cos: f32, cos_total: f32, cos_start: f32) -> f32 {
     if cos >= cos_start {
         return 1.0;
