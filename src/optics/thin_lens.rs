@@ -194,6 +194,119 @@ mod tests {
         }
     }
 
+    /// Shirley–Chiu's map at points where it is known in closed form: the
+    /// square's edge midpoints go to the disk's axis points, its corners to
+    /// the 45° diagonals, and a point at b/a = ½ on the right edge to angle
+    /// π/8 (φ = π/4 · b/a), at a/b = ½ on the top edge to 3π/8.
+    #[test]
+    fn concentric_disk_at_closed_form_points() {
+        use std::f64::consts::{FRAC_1_SQRT_2, FRAC_PI_8};
+        let cases = [
+            ((0.5, 0.5), (0.0, 0.0)),
+            ((1.0, 0.5), (1.0, 0.0)),
+            ((0.5, 1.0), (0.0, 1.0)),
+            ((0.0, 0.5), (-1.0, 0.0)),
+            ((0.5, 0.0), (0.0, -1.0)),
+            ((1.0, 1.0), (FRAC_1_SQRT_2, FRAC_1_SQRT_2)),
+            ((1.0, 0.0), (FRAC_1_SQRT_2, -FRAC_1_SQRT_2)),
+            ((1.0, 0.75), (FRAC_PI_8.cos(), FRAC_PI_8.sin())),
+            (
+                (0.75, 1.0),
+                ((3.0 * FRAC_PI_8).cos(), (3.0 * FRAC_PI_8).sin()),
+            ),
+            ((0.75, 0.5), (0.5, 0.0)),
+        ];
+        for ((ux, uy), (x, y)) in cases {
+            let p = concentric_disk(DVec2::new(ux, uy));
+            assert!(
+                (p - DVec2::new(x, y)).length() < 1e-12,
+                "u = ({ux}, {uy}): {p} vs ({x}, {y})"
+            );
+        }
+    }
+
+    /// The map is area-preserving: a uniform midpoint grid of the square
+    /// lands equally in the 32 equal-area cells of the disk (8 sectors of
+    /// π/4 × 4 rings with r² in [k/4, (k+1)/4)). A cell's boundary in the
+    /// square is a few straight segments of total length < 2, so the
+    /// midpoint grid misplaces at most ~2n of its n² points per cell: 2/n.
+    #[test]
+    fn concentric_disk_is_uniform_on_the_disk() {
+        let n = 400;
+        let mut cells = [0usize; 32];
+        for i in 0..n {
+            for j in 0..n {
+                let u = DVec2::new((i as f64 + 0.5) / n as f64, (j as f64 + 0.5) / n as f64);
+                let p = concentric_disk(u);
+                let r2 = p.length_squared();
+                assert!(r2 <= 1.0 + 1e-12);
+                let phi = p.y.atan2(p.x).rem_euclid(std::f64::consts::TAU);
+                let sector = ((phi / std::f64::consts::FRAC_PI_4) as usize).min(7);
+                let ring = ((r2 * 4.0) as usize).min(3);
+                cells[sector * 4 + ring] += 1;
+            }
+        }
+        for (k, &c) in cells.iter().enumerate() {
+            let f = c as f64 / (n * n) as f64;
+            assert!((f - 1.0 / 32.0).abs() < 2.0 / n as f64, "cell {k}: {f}");
+        }
+    }
+
+    /// The image is inverted like a pinhole's: the chief ray (through the
+    /// lens centre) from film point (x, y) leaves along (x, y, d_i), the
+    /// pinhole's direction for the same film point and film distance.
+    #[test]
+    fn chief_ray_has_the_pinhole_direction() {
+        let lens = ThinLens::new(0.05, 2.0, 2.0).unwrap();
+        let d = lens.film_distance_m();
+        for (x, y) in [(0.004, 0.0), (0.0, -0.003), (0.002, 0.001)] {
+            let r = lens
+                .sample_ray(DVec2::new(x, y), DVec2::new(0.5, 0.5), 550.0)
+                .unwrap();
+            let want = DVec3::new(x, y, d).normalize();
+            assert!(r.origin.length() < 1e-15);
+            assert!(
+                (r.direction - want).length() < 1e-12,
+                "{} vs {want}",
+                r.direction
+            );
+        }
+    }
+
+    /// One sample's weight in closed form: the physical film point of
+    /// film_m = (x, 0) is (−x, 0, −d); the lens point of u = (1, ½) is
+    /// (R, 0, 0), at r² = (R + x)² + d², so w = πR²d²/r⁴. Every ray from
+    /// one film point passes through its conjugate point at the focus
+    /// distance, the chief ray's point there.
+    #[test]
+    fn sample_weight_and_focus_in_closed_form() {
+        let lens = ThinLens::new(0.05, 2.0, 2.0).unwrap();
+        let (r_ap, d) = (lens.aperture_radius_m(), lens.film_distance_m());
+        let x = 0.004;
+        let ray = lens
+            .sample_ray(DVec2::new(x, 0.0), DVec2::new(1.0, 0.5), 550.0)
+            .unwrap();
+        assert!((ray.origin - DVec3::new(r_ap, 0.0, 0.0)).length() < 1e-15);
+        let r2 = (r_ap + x).powi(2) + d * d;
+        let want = std::f64::consts::PI * r_ap * r_ap * d * d / (r2 * r2);
+        assert!(
+            (ray.weight / want - 1.0).abs() < 1e-12,
+            "{} vs {want}",
+            ray.weight
+        );
+        let conjugate = DVec3::new(x, 0.0, d) * (2.0 / d);
+        for u in [(0.1, 0.2), (0.9, 0.5), (0.5, 0.95), (0.3, 0.7)] {
+            let ray = lens
+                .sample_ray(DVec2::new(x, 0.0), DVec2::new(u.0, u.1), 550.0)
+                .unwrap();
+            let hit = ray.origin + ray.direction * ((2.0 - ray.origin.z) / ray.direction.z);
+            assert!(
+                (hit - conjugate).length() < 1e-12,
+                "u = {u:?}: {hit} vs {conjugate}"
+            );
+        }
+    }
+
     /// The weight integrates to the exact irradiance of a uniform field:
     /// on axis E/L = π R²/(d² + R²) (exact disk solid-angle integral).
     #[test]
