@@ -36,8 +36,13 @@ mod tests {
     fn photon_energy_at_555nm() {
         // hc/λ = 3.579e-19 J at 555 nm
         assert!((photon_energy_j(555.0) - 3.5793e-19).abs() < 1e-22);
-        let p = energy_to_photons(1.0, 500.0);
-        assert!((photons_to_energy(p, 500.0) - 1.0).abs() < 1e-12);
+        // 10¹⁹ photons at 500 nm carry 10¹⁹·hc/λ = 3.972891714 J (exact SI
+        // constants), and the two conversions are each other's inverse.
+        let e = photons_to_energy(1e19, 500.0);
+        assert!((e - 3.972_891_714).abs() < 1e-9, "{e}");
+        let p = energy_to_photons(2.5, 500.0);
+        assert!((p - 2.5e19 / 3.972_891_714).abs() < 1e-9 * p, "{p}");
+        assert!((photons_to_energy(p, 500.0) - 2.5).abs() < 1e-12);
     }
     #[test]
     fn luminance_of_flat_spectrum() {
