@@ -1,13 +1,32 @@
 //! Fuzzing the experiment parser in-process: ≥ 100 000 random and mutated
 //! inputs (mutations of the valid examples), each parsed and, when valid,
 //! planned. Any panic fails the test (with the input); so does any single
-//! input taking longer than 1 s (a hang). Deterministic (fixed seeds), two
+//! input taking more than 1 s of its thread's CPU time, or 30 s of wall time
+//! (a hang). CPU time, not wall time, is the work measure: it does not grow
+//! when other processes load the machine. Deterministic (fixed seeds), two
 //! threads. The KDL crate parses at roughly 0.5 µs per byte, so inputs are kept
 //! small (comment lines and indentation stripped from the seeds).
 
 use camsim::experiment::{self, Loader};
 use std::path::Path;
 use std::time::{Duration, Instant};
+
+/// CPU time used so far by the calling thread (CLOCK_THREAD_CPUTIME_ID).
+fn thread_cpu_time() -> Duration {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: clock_gettime writes one timespec into the valid pointer.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
+    assert_eq!(rc, 0, "clock_gettime(CLOCK_THREAD_CPUTIME_ID) failed");
+    Duration::new(ts.tv_sec as u64, ts.tv_nsec as u32)
+}
+
+/// Work limits of one input: its thread's CPU time, and wall time as a
+/// backstop for a hang that blocks without computing.
+const CPU_LIMIT: Duration = Duration::from_secs(1);
+const WALL_LIMIT: Duration = Duration::from_secs(30);
 
 struct Rng(u64);
 impl Rng {
@@ -230,6 +249,7 @@ fn fuzz(thread: u64, total: usize, seeds: &[String]) -> (usize, usize, Duration)
             mutate(&mut rng, &seeds[k])
         };
         let t = Instant::now();
+        let c = thread_cpu_time();
         let r = std::panic::catch_unwind(|| {
             match experiment::parse_source(path, input.clone(), Loader::Disk) {
                 Ok(p) => {
@@ -247,7 +267,8 @@ fn fuzz(thread: u64, total: usize, seeds: &[String]) -> (usize, usize, Duration)
                 }
             }
         });
-        let dt = t.elapsed();
+        let dt = thread_cpu_time() - c;
+        let wall = t.elapsed();
         slowest = slowest.max(dt);
         match r {
             Ok((o, p)) => {
@@ -257,8 +278,8 @@ fn fuzz(thread: u64, total: usize, seeds: &[String]) -> (usize, usize, Duration)
             Err(_) => panic!("input #{i} of thread {thread} panicked:\n{input}"),
         }
         assert!(
-            dt < Duration::from_secs(1),
-            "input #{i} took {dt:?}:\n{input}"
+            dt < CPU_LIMIT && wall < WALL_LIMIT,
+            "input #{i} took {dt:?} CPU, {wall:?} wall:\n{input}"
         );
     }
     (ok, planned, slowest)
@@ -311,7 +332,7 @@ fn no_panic_or_hang_on_100k_random_and_mutated_inputs() {
     let planned: usize = results.iter().map(|r| r.1).sum();
     let slowest = results.iter().map(|r| r.2).max().unwrap();
     eprintln!(
-        "{total} inputs in {:?}: {ok} valid, {planned} planned, slowest {slowest:?}",
+        "{total} inputs in {:?}: {ok} valid, {planned} planned, slowest {slowest:?} CPU",
         t0.elapsed()
     );
     assert!(ok > 100, "mutations should keep some inputs valid ({ok})");
@@ -360,13 +381,13 @@ fn pathological_inputs_fail_cleanly() {
         ("\u{feff}\u{0}\u{7f}".repeat(1000), Some((1, 2))),
     ];
     for (i, (text, want)) in cases.into_iter().enumerate() {
-        let t = Instant::now();
+        let (t, c) = (Instant::now(), thread_cpu_time());
         let r = experiment::parse_source(path, text, Loader::Disk)
             .and_then(|p| experiment::plan(&p, None).map(|_| ()));
+        let (dt, wall) = (thread_cpu_time() - c, t.elapsed());
         assert!(
-            t.elapsed() < Duration::from_secs(5),
-            "case {i} took {:?}",
-            t.elapsed()
+            dt < 5 * CPU_LIMIT && wall < WALL_LIMIT,
+            "case {i} took {dt:?} CPU, {wall:?} wall"
         );
         match (r, want) {
             (Ok(()), None) => {}
