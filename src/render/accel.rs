@@ -105,26 +105,6 @@ impl Accel {
         })
     }
 
-    /// Closest hits of up to `bvh4_packet::LANES` rays at once: `out[l]` as
-    /// `intersect(o[l], d[l], tmax)` answers (up to ties between surfaces,
-    /// `bvh4_packet.rs`). The 4-wide BVH traverses them as one packet; the
-    /// other layouts ray by ray.
-    #[inline(always)]
-    pub fn intersect_packet(&self, o: &[Vec3], d: &[Vec3], tmax: f32, out: &mut [Option<Hit>]) {
-        if let Tree::Four(b) = &self.tree {
-            let mut raw = [None; super::bvh4_packet::LANES];
-            let n = o.len();
-            b.intersect_packet(&self.shapes, o, d, tmax, &mut raw[..n]);
-            for (x, r) in out.iter_mut().zip(&raw[..n]) {
-                *x = r.map(|(prim, h)| Hit { prim, h });
-            }
-            return;
-        }
-        for ((x, &o), &d) in out.iter_mut().zip(o).zip(d) {
-            *x = self.intersect(o, d, tmax);
-        }
-    }
-
     /// True when nothing blocks `o + t·d` for t ∈ (0, tmax).
     #[inline(always)]
     pub fn unoccluded(&self, o: Vec3, d: Vec3, tmax: f32) -> bool {

@@ -2,8 +2,7 @@
 //! depth, parallel over image rows with per-pixel seeding.
 
 use super::RenderSettings;
-use super::bvh4_packet::LANES;
-use super::integrator::{Scratch, first_hit, trace_from};
+use super::integrator::{Scratch, first_hit, trace};
 use super::sampling::Rng;
 use super::simd::RenderIsa;
 use super::world::World;
@@ -195,16 +194,6 @@ pub fn render_world_at(
     Ok(img)
 }
 
-/// A camera sample waiting for its packet.
-struct Pending {
-    batch: usize,
-    o: Vec3,
-    d: Vec3,
-    weight: f64,
-    hero: Option<usize>,
-    rng: Rng,
-}
-
 /// What every row of one render shares.
 struct RowJob<'a> {
     world: &'a World,
@@ -248,49 +237,6 @@ impl RowJob<'_> {
         self.row(r)
     }
 
-    /// Trace the pending camera rays: closest hits as one packet, then each
-    /// path on its own, accumulated in sample order. (A method, not a
-    /// closure: it must inline into each `#[target_feature]` copy of `row`.)
-    #[inline(always)]
-    fn flush(&self, pending: &mut Vec<Pending>, acc: &mut [f64], nan: &mut u64, sc: &mut Scratch) {
-        let (world, s) = (self.world, self.s);
-        let nb = world.bands;
-        let n = pending.len();
-        if n == 0 {
-            return;
-        }
-        let o: [Vec3; LANES] = std::array::from_fn(|l| pending[l.min(n - 1)].o);
-        let d: [Vec3; LANES] = std::array::from_fn(|l| pending[l.min(n - 1)].d);
-        let mut first = [None; LANES];
-        world
-            .accel
-            .intersect_packet(&o[..n], &d[..n], f32::INFINITY, &mut first[..n]);
-        for (p, &hit) in pending.iter_mut().zip(&first) {
-            match p.hero {
-                Some(b) => sc
-                    .beta
-                    .iter_mut()
-                    .enumerate()
-                    .for_each(|(j, x)| *x = if j == b { nb as f32 } else { 0.0 }),
-                // Padding bands (≥ nb) carry no throughput.
-                None => {
-                    sc.beta[..nb].fill(1.0);
-                    sc.beta[nb..].fill(0.0);
-                }
-            }
-            trace_from(world, hit, p.o, p.d, s.max_bounces, p.hero, &mut p.rng, sc);
-            if sc.l.iter().any(|x| !x.is_finite()) {
-                *nan += 1;
-                continue;
-            }
-            let a = &mut acc[p.batch * nb..(p.batch + 1) * nb];
-            for (x, &l) in a.iter_mut().zip(&sc.l) {
-                *x += l as f64 * p.weight;
-            }
-        }
-        pending.clear();
-    }
-
     /// One image row: every sample of every pixel, then the pixel means and
     /// standard errors. Returns the non-finite sample count and the weighted
     /// standard errors.
@@ -332,8 +278,6 @@ impl RowJob<'_> {
         let mut ss_px = vec![0.0f64; nb];
         let mut cells: Vec<u32> = Vec::new();
         let mut nan = 0u64;
-        let mut pending: Vec<Pending> = Vec::with_capacity(LANES);
-
         for ix in 0..roi.w as usize {
             let px = roi.x + ix as u32;
             let pixel_id = py as u64 * film.width_px as u64 + px as u64;
@@ -351,14 +295,14 @@ impl RowJob<'_> {
             let pixel_key = Rng::pixel_key(s.seed, pixel_id);
             acc.iter_mut().for_each(|x| *x = 0.0);
             counts.iter_mut().for_each(|x| *x = 0);
-            for (bi, count) in counts.iter_mut().enumerate() {
+            for bi in 0..batches {
                 // Samples of batch `bi` are si = bi, bi + batches, … (the same
                 // split and accumulation order as a plain round-robin loop).
                 let nk = (s.spp as usize - bi).div_ceil(batches);
                 let m = stratify(&mut cells, s.seed, pixel_id, bi as u64, nk);
                 for (j, &cell) in cells[..nk].iter().enumerate() {
                     let si = bi + j * batches;
-                    *count += 1;
+                    counts[bi] += 1;
                     let mut rng = Rng::for_pixel_sample(pixel_key, si as u64);
                     let (ux, uy) = rng.uniform2();
                     let (ua, ub) = rng.uniform2();
@@ -384,22 +328,29 @@ impl RowJob<'_> {
                     ) else {
                         continue;
                     };
-                    // Traced in packets of the pixel's camera rays, in
-                    // sample order (each keeps its own stream).
-                    pending.push(Pending {
-                        batch: bi,
-                        o,
-                        d,
-                        weight,
-                        hero,
-                        rng,
-                    });
-                    if pending.len() == LANES {
-                        self.flush(&mut pending, &mut acc, &mut nan, &mut sc);
+                    match hero {
+                        Some(b) => sc
+                            .beta
+                            .iter_mut()
+                            .enumerate()
+                            .for_each(|(j, x)| *x = if j == b { nb as f32 } else { 0.0 }),
+                        // Padding bands (≥ nb) carry no throughput.
+                        None => {
+                            sc.beta[..nb].fill(1.0);
+                            sc.beta[nb..].fill(0.0);
+                        }
+                    }
+                    trace(world, o, d, s.max_bounces, hero, &mut rng, &mut sc);
+                    if sc.l.iter().any(|x| !x.is_finite()) {
+                        nan += 1;
+                        continue;
+                    }
+                    let a = &mut acc[bi * nb..(bi + 1) * nb];
+                    for (x, &l) in a.iter_mut().zip(&sc.l) {
+                        *x += l as f64 * weight;
                     }
                 }
             }
-            self.flush(&mut pending, &mut acc, &mut nan, &mut sc);
             // Mean and standard error from the batch means. Totals add the
             // batches in order 0, 1, … for every band.
             let n = s.spp as f64;

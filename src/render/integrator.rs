@@ -10,7 +10,6 @@
 //! wavelength), scaled by the band count, and terminates the others — unbiased,
 //! and only dispersive paths pay the colour noise.
 
-use super::accel::Hit;
 use super::geometry::offset_ray_origin;
 use super::sampling::{Frame, Rng, power_heuristic};
 use super::world::{LightKind, World};
@@ -86,25 +85,6 @@ fn add_scaled(l: &mut [f32], beta: &[f32], e: &[f32], s: f32) {
 #[inline(always)]
 pub fn trace(
     world: &World,
-    o: Vec3,
-    d: Vec3,
-    max_bounces: u32,
-    hero: Option<usize>,
-    rng: &mut Rng,
-    sc: &mut Scratch,
-) {
-    let first = world.accel.intersect(o, d, f32::INFINITY);
-    trace_from(world, first, o, d, max_bounces, hero, rng, sc);
-}
-
-/// `trace` with the camera ray's closest hit already found (`first`, as
-/// `world.accel.intersect(o, d, ∞)` answers; the film finds a pixel's in
-/// packets).
-#[inline(always)]
-#[allow(clippy::too_many_arguments)]
-pub fn trace_from(
-    world: &World,
-    first: Option<Hit>,
     mut o: Vec3,
     mut d: Vec3,
     max_bounces: u32,
@@ -112,7 +92,6 @@ pub fn trace_from(
     rng: &mut Rng,
     sc: &mut Scratch,
 ) {
-    let mut first = Some(first);
     let nb = world.bands;
     sc.l.iter_mut().for_each(|x| *x = 0.0);
     let mut specular = true;
@@ -120,11 +99,7 @@ pub fn trace_from(
     let mut eta_scale = 1.0f32;
     let mut depth = 0u32;
     loop {
-        let hit = match first.take() {
-            Some(h) => h,
-            None => world.accel.intersect(o, d, f32::INFINITY),
-        };
-        let Some(hit) = hit else {
+        let Some(hit) = world.accel.intersect(o, d, f32::INFINITY) else {
             for &li in &world.infinite {
                 if let LightKind::Infinite { l } = &world.lights[li as usize] {
                     let w = if specular {
