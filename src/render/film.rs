@@ -292,6 +292,7 @@ impl RowJob<'_> {
                 lab[ix] = h.object;
                 dep[ix] = h.t;
             }
+            let pixel_key = Rng::pixel_key(s.seed, pixel_id);
             acc.iter_mut().for_each(|x| *x = 0.0);
             counts.iter_mut().for_each(|x| *x = 0);
             for bi in 0..batches {
@@ -302,7 +303,7 @@ impl RowJob<'_> {
                 for (j, &cell) in cells[..nk].iter().enumerate() {
                     let si = bi + j * batches;
                     counts[bi] += 1;
-                    let mut rng = Rng::for_sample(s.seed, pixel_id, si as u64);
+                    let mut rng = Rng::for_pixel_sample(pixel_key, si as u64);
                     let (ux, uy) = rng.uniform2();
                     let (ua, ub) = rng.uniform2();
                     // Jitter inside the sample's own cell of the m×m grid.

@@ -27,7 +27,19 @@ impl Rng {
     /// Independent stream for one pixel sample.
     #[inline(always)]
     pub fn for_sample(seed: u64, pixel: u64, sample: u64) -> Self {
-        let a = mix64(seed ^ mix64(pixel.wrapping_mul(0xD1B5_4A32_D192_ED03)));
+        Self::for_pixel_sample(Self::pixel_key(seed, pixel), sample)
+    }
+    /// The part of a sample's stream key shared by all samples of one pixel
+    /// (hashed once per pixel instead of once per sample).
+    #[inline(always)]
+    pub fn pixel_key(seed: u64, pixel: u64) -> u64 {
+        mix64(seed ^ mix64(pixel.wrapping_mul(0xD1B5_4A32_D192_ED03)))
+    }
+    /// `for_sample(seed, pixel, sample)` from `pixel_key(seed, pixel)`: the
+    /// same stream.
+    #[inline(always)]
+    pub fn for_pixel_sample(pixel_key: u64, sample: u64) -> Self {
+        let a = pixel_key;
         let b = mix64(a ^ sample.wrapping_mul(0x8CB9_2BA7_2F3D_8DD7));
         let mut r = Rng {
             state: 0,
