@@ -215,6 +215,22 @@ mod tests {
                 ((3.0 * FRAC_PI_8).cos(), (3.0 * FRAC_PI_8).sin()),
             ),
             ((0.75, 0.5), (0.5, 0.0)),
+            // Inside the square (|a| < 1, so b/a differs from b·a and b % a):
+            // a = 0.75, b = 0.25 → r = 0.75, φ = π/12; swapped → φ = 5π/12.
+            (
+                (0.875, 0.625),
+                (
+                    0.75 * (FRAC_PI_8 * 2.0 / 3.0).cos(),
+                    0.75 * (FRAC_PI_8 * 2.0 / 3.0).sin(),
+                ),
+            ),
+            (
+                (0.625, 0.875),
+                (
+                    0.75 * (FRAC_PI_8 * 10.0 / 3.0).cos(),
+                    0.75 * (FRAC_PI_8 * 10.0 / 3.0).sin(),
+                ),
+            ),
         ];
         for ((ux, uy), (x, y)) in cases {
             let p = concentric_disk(DVec2::new(ux, uy));
@@ -226,14 +242,14 @@ mod tests {
     }
 
     /// The map is area-preserving: a uniform midpoint grid of the square
-    /// lands equally in the 32 equal-area cells of the disk (8 sectors of
-    /// π/4 × 4 rings with r² in [k/4, (k+1)/4)). A cell's boundary in the
+    /// lands equally in the 64 equal-area cells of the disk (16 sectors of
+    /// π/8 × 4 rings with r² in [k/4, (k+1)/4)). A cell's boundary in the
     /// square is a few straight segments of total length < 2, so the
     /// midpoint grid misplaces at most ~2n of its n² points per cell: 2/n.
     #[test]
     fn concentric_disk_is_uniform_on_the_disk() {
         let n = 400;
-        let mut cells = [0usize; 32];
+        let mut cells = [0usize; 64];
         for i in 0..n {
             for j in 0..n {
                 let u = DVec2::new((i as f64 + 0.5) / n as f64, (j as f64 + 0.5) / n as f64);
@@ -241,14 +257,14 @@ mod tests {
                 let r2 = p.length_squared();
                 assert!(r2 <= 1.0 + 1e-12);
                 let phi = p.y.atan2(p.x).rem_euclid(std::f64::consts::TAU);
-                let sector = ((phi / std::f64::consts::FRAC_PI_4) as usize).min(7);
+                let sector = ((phi / std::f64::consts::FRAC_PI_8) as usize).min(15);
                 let ring = ((r2 * 4.0) as usize).min(3);
                 cells[sector * 4 + ring] += 1;
             }
         }
         for (k, &c) in cells.iter().enumerate() {
             let f = c as f64 / (n * n) as f64;
-            assert!((f - 1.0 / 32.0).abs() < 2.0 / n as f64, "cell {k}: {f}");
+            assert!((f - 1.0 / 64.0).abs() < 2.0 / n as f64, "cell {k}: {f}");
         }
     }
 
