@@ -310,6 +310,9 @@ mod tests {
             "{} vs {want}",
             ray.weight
         );
+        // The camera reports the thin-lens equation's d = f·z/(z − f).
+        let d_eq = 0.05 * 2.0 / (2.0 - 0.05);
+        assert!((Camera::film_distance_m(&lens).unwrap() - d_eq).abs() < 1e-15);
         let conjugate = DVec3::new(x, 0.0, d) * (2.0 / d);
         for u in [(0.1, 0.2), (0.9, 0.5), (0.5, 0.95), (0.3, 0.7)] {
             let ray = lens
