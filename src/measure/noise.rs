@@ -460,3 +460,57 @@ pub fn measure_with(
         regions,
     ))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::params::{ParamDict, Params, Value};
+
+    fn request(props: &[(&str, f64)]) -> std::result::Result<NoiseRequest, ParamError> {
+        let mut p = Params::new();
+        for &(k, v) in props {
+            p.set(k, Value::Number(v));
+        }
+        from_params(&ParamDict::new(&p, &SCHEMA))
+    }
+
+    /// Each range's boundary: the first value allowed is accepted with its
+    /// value, the last refused is refused.
+    #[test]
+    fn ranges_are_closed_where_the_schema_says() {
+        assert_eq!(
+            request(&[("nonuniform-ratio", 1.0)])
+                .unwrap()
+                .options
+                .nonuniform_ratio,
+            1.0
+        );
+        assert!(request(&[("nonuniform-ratio", 0.999)]).is_err());
+        assert_eq!(
+            request(&[("nonuniform-ratio", 1.5)])
+                .unwrap()
+                .options
+                .nonuniform_ratio,
+            1.5
+        );
+        assert_eq!(request(&[]).unwrap().band, 0.95);
+        assert_eq!(request(&[("band-percent", 50.0)]).unwrap().band, 0.5);
+        assert_eq!(request(&[("band-percent", 90.0)]).unwrap().band, 0.9);
+        assert!(request(&[("band-percent", 100.0)]).is_err());
+        assert!(request(&[("band-percent", 49.0)]).is_err());
+        assert_eq!(request(&[("seed", 12345.0)]).unwrap().seed, Some(12345));
+        let max = (1u64 << 53) as f64;
+        assert_eq!(request(&[("seed", max)]).unwrap().seed, Some(1 << 53));
+    }
+
+    /// The sensor image's conversion gain is the one the classification uses.
+    #[test]
+    fn for_sensor_takes_the_images_conversion_gain() {
+        let cfa = crate::image::CfaPattern::bayer("rggb").unwrap();
+        let mut img = crate::image::SensorImage::from_raw_dv(4, 4, &cfa, &[64; 16], 64.0, 1023.0);
+        img.conversion_gain_dv_per_e = 0.37;
+        let o = NoiseOptions::for_sensor(&img);
+        assert_eq!(o.conversion_gain_dv_per_e, 0.37);
+        assert_eq!(o.region_px, NoiseOptions::default().region_px);
+    }
+}
