@@ -28,22 +28,22 @@ OUT_ROOT="${MUTANTS_OUT:-$HERE/target/mutants}"
 
 case "$MODULE" in
   pinhole)    FILES=(src/optics/pinhole.rs)
-              TESTS=(--lib --test optics_pinhole --test render_physics --test render_cli) ;;
+              TESTS=(--lib --test=optics_pinhole --test=render_physics --test=render_cli) ;;
   thin-lens)  FILES=(src/optics/thin_lens.rs)
-              TESTS=(--lib --test render_cli --test render_physics --test pbrt_parse) ;;
+              TESTS=(--lib --test=render_cli --test=render_physics --test=pbrt_parse) ;;
   rtf)        FILES=(src/optics/rtf.rs)
-              TESTS=(--lib --test optics_rtf --test optics_p4a_zemax --test experiment_lens_rtf) ;;
+              TESTS=(--lib --test=optics_rtf --test=optics_p4a_zemax --test=experiment_lens_rtf) ;;
   sfr)        FILES=(src/measure/sfr.rs)
-              TESTS=(--lib --test measure_sfr --test measure_options --test params_reach) ;;
+              TESTS=(--lib --test=measure_sfr --test=measure_options --test=params_reach) ;;
   noise)      FILES=(src/measure/noise.rs)
-              TESTS=(--lib --test measure_noise --test sensor_noise --test measure_options
-                     --test params_reach --test sensor_figures) ;;
+              TESTS=(--lib --test=measure_noise --test=sensor_noise --test=measure_options
+                     --test=params_reach --test=sensor_figures) ;;
   sensor)     FILES=(src/sensor/pipeline.rs src/sensor/readout.rs src/sensor/rng.rs
                      src/sensor/relative_illumination.rs)
-              TESTS=(--lib --test sensor_pipeline --test sensor_noise --test sensor_output
-                     --test sensor_calibration) ;;
+              TESTS=(--lib --test=sensor_pipeline --test=sensor_noise --test=sensor_output
+                     --test=sensor_calibration) ;;
   units)      FILES=(src/spectrum/units.rs)
-              TESTS=(--lib --test sensor_pipeline --test render_cli) ;;
+              TESTS=(--lib --test=sensor_pipeline --test=render_cli) ;;
   *) echo "unknown module '$MODULE' (pinhole thin-lens rtf sfr noise sensor units)" >&2; exit 2 ;;
 esac
 
@@ -64,4 +64,8 @@ OUT="$OUT_ROOT/$NAME"
 mkdir -p "$OUT"
 for f in "${FILES[@]}"; do ARGS+=(-f "$f"); done
 cd "$TREE"
-cargo mutants --in-place --profile mutants --timeout 300 "${ARGS[@]}" -o "$OUT" -- "${TESTS[@]}"
+# The test targets go to every cargo invocation (-C), not only to the test
+# run: cargo-mutants builds each mutant with `cargo test --no-run`, which
+# otherwise links all ~55 test binaries for every mutant.
+for t in "${TESTS[@]}"; do ARGS+=("--cargo-arg=$t"); done
+cargo mutants --in-place --profile mutants --timeout 300 "${ARGS[@]}" -o "$OUT"
