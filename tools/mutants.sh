@@ -13,8 +13,8 @@
 # SHARD (k/n) tests every n-th mutant starting at k (round-robin), so n runs
 # with k = 0..n-1 together test every mutant once.
 #
-# Builds use the `mutants` profile (Cargo.toml: opt-level 0, incremental), in
-# which a mutant rebuilds in ~5 s instead of ~70 s in release. Mutations are
+# Builds use the `mutants` profile (Cargo.toml: opt-level 1, incremental), in
+# which a mutant rebuilds in ~5–10 s instead of ~70 s in release. Mutations are
 # made in place in a scratch git worktree ($MUTANTS_TREE, default
 # ../camsim-mutants), never in the tree you work in; results go to
 # $MUTANTS_OUT/MODULE[-shard-k-of-n]/mutants.out (caught.txt, missed.txt,
@@ -37,7 +37,7 @@ case "$MODULE" in
               TESTS=(--lib --test=measure_sfr --test=measure_options --test=params_reach) ;;
   noise)      FILES=(src/measure/noise.rs)
               TESTS=(--lib --test=measure_noise --test=sensor_noise --test=measure_options
-                     --test=params_reach --test=sensor_figures) ;;
+                     --test=params_reach --test=sensor_figures --test=measure_cli) ;;
   sensor)     FILES=(src/sensor/pipeline.rs src/sensor/readout.rs src/sensor/rng.rs
                      src/sensor/relative_illumination.rs)
               TESTS=(--lib --test=sensor_pipeline --test=sensor_noise --test=sensor_output
