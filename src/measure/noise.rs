@@ -503,6 +503,25 @@ mod tests {
         assert_eq!(request(&[("seed", max)]).unwrap().seed, Some(1 << 53));
     }
 
+    /// The rendering-noise variance widens the outlier test's σ: a pixel
+    /// 40 DV above a flat 100 DV region (1 DV/e⁻, no read noise) is beyond
+    /// 3σ = 30 DV of Poisson noise alone, and inside 3·√(100 + 100) = 42.4 DV
+    /// once a known 100 DV² of extra variance is added.
+    #[test]
+    fn extra_variance_widens_the_outlier_test() {
+        let mut v = vec![100.0; 100];
+        v[55] = 140.0;
+        let plane = Plane::new(10, 10, v).unwrap();
+        let extra = Plane::new(10, 10, vec![100.0; 100]).unwrap();
+        let rect = Rect::new(0, 0, 10, 10);
+        let opts = NoiseOptions::default();
+        let without = classify(&plane, rect, &opts, &mut SplitMix64(1), None).unwrap();
+        assert_eq!(without.verdict, Verdict::Outlier);
+        let with = classify(&plane, rect, &opts, &mut SplitMix64(1), Some(&extra)).unwrap();
+        assert_ne!(with.verdict, Verdict::Outlier);
+        assert_ne!(with.verdict, Verdict::Unusable);
+    }
+
     /// The sensor image's conversion gain is the one the classification uses.
     #[test]
     fn for_sensor_takes_the_images_conversion_gain() {
