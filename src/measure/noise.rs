@@ -522,6 +522,39 @@ mod tests {
         assert_ne!(with.verdict, Verdict::Unusable);
     }
 
+    /// Fewer pixels than the folds need (6 per fold), or a median at or
+    /// below zero, leave a region unusable; each condition alone suffices.
+    #[test]
+    fn too_few_pixels_or_a_dark_median_is_unusable() {
+        let opts = NoiseOptions::default();
+        let bright = Plane::new(10, 10, vec![100.0; 100]).unwrap();
+        let small = classify(
+            &bright,
+            Rect::new(0, 0, 5, 5),
+            &opts,
+            &mut SplitMix64(1),
+            None,
+        );
+        assert_eq!(small.unwrap().verdict, Verdict::Unusable);
+        let whole = classify(
+            &bright,
+            Rect::new(0, 0, 10, 10),
+            &opts,
+            &mut SplitMix64(1),
+            None,
+        );
+        assert_eq!(whole.unwrap().verdict, Verdict::Accepted);
+        let dark = Plane::new(10, 10, vec![0.0; 100]).unwrap();
+        let dark = classify(
+            &dark,
+            Rect::new(0, 0, 10, 10),
+            &opts,
+            &mut SplitMix64(1),
+            None,
+        );
+        assert_eq!(dark.unwrap().verdict, Verdict::Unusable);
+    }
+
     /// The sensor image's conversion gain is the one the classification uses.
     #[test]
     fn for_sensor_takes_the_images_conversion_gain() {
