@@ -34,14 +34,15 @@ case "$MODULE" in
   rtf)        FILES=(src/optics/rtf.rs)
               TESTS=(--lib --test=optics_rtf --test=optics_p4a_zemax --test=experiment_lens_rtf) ;;
   sfr)        FILES=(src/measure/sfr.rs)
-              TESTS=(--lib --test=measure_sfr --test=measure_options --test=params_reach) ;;
+              TESTS=(--lib --test=measure_sfr --test=measure_options --test=params_reach
+                     --test=measure_cli) ;;
   noise)      FILES=(src/measure/noise.rs)
               TESTS=(--lib --test=measure_noise --test=sensor_noise --test=measure_options
                      --test=params_reach --test=sensor_figures --test=measure_cli) ;;
   sensor)     FILES=(src/sensor/pipeline.rs src/sensor/readout.rs src/sensor/rng.rs
                      src/sensor/relative_illumination.rs)
               TESTS=(--lib --test=sensor_pipeline --test=sensor_noise --test=sensor_output
-                     --test=sensor_calibration) ;;
+                     --test=sensor_calibration --test=sensor_figures) ;;
   units)      FILES=(src/spectrum/units.rs)
               TESTS=(--lib --test=sensor_pipeline --test=render_cli) ;;
   *) echo "unknown module '$MODULE' (pinhole thin-lens rtf sfr noise sensor units)" >&2; exit 2 ;;
