@@ -522,6 +522,23 @@ mod tests {
         assert_ne!(with.verdict, Verdict::Unusable);
     }
 
+    /// Read noise widens it the same way: 10 e⁻ of read noise at 1 DV/e⁻
+    /// make σ = √(100 + 100) DV, so the 40 DV pixel is inside 3σ.
+    #[test]
+    fn read_noise_widens_the_outlier_test() {
+        let mut v = vec![100.0; 100];
+        v[55] = 140.0;
+        let plane = Plane::new(10, 10, v).unwrap();
+        let rect = Rect::new(0, 0, 10, 10);
+        let opts = NoiseOptions {
+            read_noise_e: 10.0,
+            ..Default::default()
+        };
+        let r = classify(&plane, rect, &opts, &mut SplitMix64(1), None).unwrap();
+        assert_ne!(r.verdict, Verdict::Outlier);
+        assert_ne!(r.verdict, Verdict::Unusable);
+    }
+
     /// Fewer pixels than the folds need (6 per fold), or a median at or
     /// below zero, leave a region unusable; each condition alone suffices.
     #[test]
@@ -544,6 +561,15 @@ mod tests {
             None,
         );
         assert_eq!(whole.unwrap().verdict, Verdict::Accepted);
+        // Exactly 6 per fold (30 pixels) is enough.
+        let thirty = classify(
+            &bright,
+            Rect::new(0, 0, 6, 5),
+            &opts,
+            &mut SplitMix64(1),
+            None,
+        );
+        assert_eq!(thirty.unwrap().verdict, Verdict::Accepted);
         let dark = Plane::new(10, 10, vec![0.0; 100]).unwrap();
         let dark = classify(
             &dark,
