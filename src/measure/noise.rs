@@ -522,6 +522,21 @@ mod tests {
         assert_ne!(with.verdict, Verdict::Unusable);
     }
 
+    /// An outlier lies beyond `outlier_sigma`·σ: a pixel exactly at 3σ
+    /// (130 DV over a 100 DV median, σ = 10 DV) is not one, 131 DV is.
+    #[test]
+    fn outliers_lie_strictly_beyond_the_threshold() {
+        let rect = Rect::new(0, 0, 10, 10);
+        let opts = NoiseOptions::default();
+        for (bump, outlier) in [(130.0, false), (131.0, true)] {
+            let mut v = vec![100.0; 100];
+            v[55] = bump;
+            let plane = Plane::new(10, 10, v).unwrap();
+            let r = classify(&plane, rect, &opts, &mut SplitMix64(1), None).unwrap();
+            assert_eq!(r.verdict == Verdict::Outlier, outlier, "{bump} DV");
+        }
+    }
+
     /// Read noise widens it the same way: 10 e⁻ of read noise at 1 DV/e⁻
     /// make σ = √(100 + 100) DV, so the 40 DV pixel is inside 3σ.
     #[test]
