@@ -309,12 +309,7 @@ pub fn classify(
         r.verdict = Verdict::Outlier;
         return Ok(r);
     }
-    // Random fold assignment: a shuffled round-robin.
-    let mut fold: Vec<usize> = (0..n).map(|i| i % opts.folds).collect();
-    for i in (1..n).rev() {
-        let j = rng.below(i as u64 + 1) as usize;
-        fold.swap(i, j);
-    }
+    let fold = fold_assignment(n, opts.folds, rng);
     let s = opts.region_px.max(2) as f64 / 2.0;
     let basis = |x: f64, y: f64| {
         let (u, v) = ((x - s) / s, (y - s) / s);
@@ -343,6 +338,17 @@ pub fn classify(
         Verdict::Accepted
     };
     Ok(r)
+}
+
+/// Random fold assignment for cross-validation: a shuffled round-robin, so
+/// each of the `folds` folds holds ⌊n/folds⌋ or ⌈n/folds⌉ of the `n` pixels.
+fn fold_assignment(n: usize, folds: usize, rng: &mut SplitMix64) -> Vec<usize> {
+    let mut fold: Vec<usize> = (0..n).map(|i| i % folds).collect();
+    for i in (1..n).rev() {
+        let j = rng.below(i as u64 + 1) as usize;
+        fold.swap(i, j);
+    }
+    fold
 }
 
 /// Draw `opts.regions` random squares and classify each (`extra`: see [`classify`]).
@@ -520,6 +526,21 @@ mod tests {
         let with = classify(&plane, rect, &opts, &mut SplitMix64(1), Some(&extra)).unwrap();
         assert_ne!(with.verdict, Verdict::Outlier);
         assert_ne!(with.verdict, Verdict::Unusable);
+    }
+
+    /// Every pixel is held out exactly once, the folds balanced to one pixel.
+    #[test]
+    fn folds_are_balanced_and_cover_every_pixel() {
+        let f = fold_assignment(103, 5, &mut SplitMix64(7));
+        assert_eq!(f.len(), 103);
+        let mut count = [0usize; 5];
+        for &k in &f {
+            count[k] += 1; // panics if a label is ≥ 5
+        }
+        assert_eq!(count.iter().filter(|&&c| c == 21).count(), 3);
+        assert_eq!(count.iter().filter(|&&c| c == 20).count(), 2);
+        // Shuffled, not the round-robin order itself.
+        assert!(f.iter().enumerate().any(|(i, &k)| k != i % 5));
     }
 
     /// An outlier lies beyond `outlier_sigma`·σ: a pixel exactly at 3σ
