@@ -543,6 +543,36 @@ mod tests {
         assert!(f.iter().enumerate().any(|(i, &k)| k != i % 5));
     }
 
+    /// The held-out prediction is a full quadratic in x and y: on a
+    /// noise-free quadratic surface it is exact (to rounding), the constant
+    /// is not, and the region is non-uniform.
+    #[test]
+    fn quadratic_model_predicts_a_quadratic_surface_exactly() {
+        let mut v = vec![];
+        for y in 0..10 {
+            for x in 0..10 {
+                let (x, y) = (x as f64, y as f64);
+                v.push(100.0 + 3.0 * x + 2.0 * y + 0.5 * x * y - 0.2 * x * x + 0.1 * y * y);
+            }
+        }
+        let plane = Plane::new(10, 10, v).unwrap();
+        let opts = NoiseOptions {
+            outlier_sigma: 100.0,
+            ..Default::default()
+        };
+        let r = classify(
+            &plane,
+            Rect::new(0, 0, 10, 10),
+            &opts,
+            &mut SplitMix64(1),
+            None,
+        )
+        .unwrap();
+        assert!(r.rmse_poly < 1e-9, "{}", r.rmse_poly);
+        assert!(r.rmse_const > 5.0, "{}", r.rmse_const);
+        assert_eq!(r.verdict, Verdict::NonUniform);
+    }
+
     /// An outlier lies beyond `outlier_sigma`·σ: a pixel exactly at 3σ
     /// (130 DV over a 100 DV median, σ = 10 DV) is not one, 131 DV is.
     #[test]
