@@ -671,6 +671,33 @@ mod tests {
         assert_eq!(dark.unwrap().verdict, Verdict::Unusable);
     }
 
+    /// Regions must be ≥ 2 px and fit the image in each direction (an image
+    /// exactly one region wide and high has one place for it); the
+    /// conversion gain must be a positive number. Each condition alone fails.
+    #[test]
+    fn region_size_and_conversion_gain_are_checked() {
+        let run = |w: usize, h: usize, region_px: usize, k: f64| {
+            let plane = Plane::new(w, h, vec![100.0; w * h]).unwrap();
+            let opts = NoiseOptions {
+                region_px,
+                regions: 3,
+                conversion_gain_dv_per_e: k,
+                ..Default::default()
+            };
+            uniform_regions(&plane, &opts, None)
+        };
+        let exact = run(6, 6, 6, 1.0).unwrap();
+        assert_eq!(exact.len(), 3);
+        assert!(exact.iter().all(|r| r.rect == Rect::new(0, 0, 6, 6)));
+        assert!(run(8, 8, 2, 1.0).is_ok());
+        assert!(run(8, 8, 1, 1.0).is_err());
+        assert!(run(5, 6, 6, 1.0).is_err());
+        assert!(run(6, 5, 6, 1.0).is_err());
+        assert!(run(8, 8, 6, f64::NAN).is_err());
+        assert!(run(8, 8, 6, 0.0).is_err());
+        assert!(run(8, 8, 6, -1.0).is_err());
+    }
+
     /// The sensor image's conversion gain is the one the classification uses.
     #[test]
     fn for_sensor_takes_the_images_conversion_gain() {
