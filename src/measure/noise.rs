@@ -698,6 +698,101 @@ mod tests {
         assert!(run(8, 8, 6, -1.0).is_err());
     }
 
+    /// Every placement is drawn: a 6 px region in a 7×7 image starts at 0 or
+    /// 1 in each direction, and 200 draws see both (each is missed with
+    /// probability 2⁻²⁰⁰).
+    #[test]
+    fn regions_reach_the_last_placement() {
+        let plane = Plane::new(7, 7, vec![100.0; 49]).unwrap();
+        let opts = NoiseOptions {
+            region_px: 6,
+            regions: 200,
+            ..Default::default()
+        };
+        let r = uniform_regions(&plane, &opts, None).unwrap();
+        for pick in [|r: &Region| r.rect.x, |r: &Region| r.rect.y] {
+            let starts: std::collections::BTreeSet<u32> = r.iter().map(pick).collect();
+            assert_eq!(starts.into_iter().collect::<Vec<_>>(), vec![0, 1]);
+        }
+    }
+
+    /// Gaussian noise of σ = 10 DV on a flat 100 DV field (Poisson's σ at
+    /// 1 DV/e⁻), `regions` squares of 10×10 px in a 200×200 image.
+    fn flat_noisy(seed: u64) -> Plane {
+        let mut rng = SplitMix64(seed);
+        let v = (0..200 * 200).map(|_| 100.0 + 10.0 * rng.gauss()).collect();
+        Plane::new(200, 200, v).unwrap()
+    }
+
+    /// On pure noise the quadratic's held-out error is the noise itself,
+    /// inflated by its six fitted coefficients: on average by
+    /// √(1 + 6/n_train) ≈ 1.037 over the constant's √(1 + 1/n_train) for
+    /// 80 training pixels. The band [0.98, 1.12] holds that plus the ratio's
+    /// spread over one 100 px region (≈ 2 %, the two errors sharing their noise).
+    #[test]
+    fn on_pure_noise_the_quadratic_errs_by_the_noise() {
+        let plane = flat_noisy(3);
+        for (i, x0) in [0u32, 40, 80, 120].into_iter().enumerate() {
+            let r = classify(
+                &plane,
+                Rect::new(x0, x0, 10, 10),
+                &NoiseOptions {
+                    outlier_sigma: 100.0,
+                    ..Default::default()
+                },
+                &mut SplitMix64(i as u64),
+                None,
+            )
+            .unwrap();
+            let ratio = r.rmse_poly / r.rmse_const;
+            assert!((0.98..1.12).contains(&ratio), "region {i}: {ratio}");
+            assert!((r.rmse_const / r.std_dv - 1.0).abs() < 0.05);
+        }
+    }
+
+    /// The figures of a flat noisy image: the accepted count with its
+    /// binomial standard error √(N·p·(1−p)); `std_mean`, the accepted
+    /// regions' mean standard deviation, against the true σ = 10 DV (lowered
+    /// 1.3 % by the 3σ outlier cut, which truncates the accepted regions'
+    /// values; its standard error ≈ 0.1 %, so a 3 % band), and its standard
+    /// error against the spread of a 100-pixel sample σ, σ/√(2·99), over
+    /// √N_accepted regions (the estimate's own relative error is
+    /// 1/√(2(N−1)) ≈ 10 % for ~50 regions: a 40 % band).
+    #[test]
+    fn figures_of_a_flat_noisy_image() {
+        let plane = flat_noisy(5);
+        let opts = NoiseOptions {
+            regions: 100,
+            ..Default::default()
+        };
+        let (m, regions) = measure(&plane, &opts, "noise").unwrap();
+        let fig = |q: &str| {
+            m.figures
+                .iter()
+                .find(|f| f.quantity == q)
+                .unwrap_or_else(|| panic!("no {q}"))
+                .clone()
+        };
+        let n = regions.len() as f64;
+        let acc = regions
+            .iter()
+            .filter(|r| r.verdict == Verdict::Accepted)
+            .count() as f64;
+        let p = acc / n;
+        assert!(p > 0.2 && p < 0.95, "accepted fraction {p}");
+        let count = fig("regions_accepted");
+        assert_eq!(count.value, acc);
+        assert!((count.stderr - (n * p * (1.0 - p)).sqrt()).abs() < 1e-12);
+        let s = fig("std_mean");
+        assert!((s.value / 10.0 - 1.0).abs() < 0.03, "{}", s.value);
+        let expected = 10.0 / (2.0 * 99.0f64).sqrt() / acc.sqrt();
+        assert!(
+            (s.stderr / expected - 1.0).abs() < 0.4,
+            "{} vs {expected}",
+            s.stderr
+        );
+    }
+
     /// The sensor image's conversion gain is the one the classification uses.
     #[test]
     fn for_sensor_takes_the_images_conversion_gain() {
