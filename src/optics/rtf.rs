@@ -746,3 +746,6 @@ impl Camera for RtfCamera {
         )
     }
 }
+
+#[cfg(test)]
+mod tests;
