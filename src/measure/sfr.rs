@@ -1222,29 +1222,4 @@ pub fn run_on_sensor(
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn hamming_window_peaks_at_mid() {
-        let w = ahamming(11, 5.0);
-        assert!(
-            (w[5] - 1.0).abs() < 1e-12
-                && (w[0] - 0.08).abs() < 1e-12
-                && (w[10] - 0.08).abs() < 1e-12
-        );
-    }
-
-    #[test]
-    fn rejects_flat_and_axis_aligned_edges() {
-        let flat = Plane::new(32, 32, vec![1.0; 1024]).unwrap();
-        assert!(sfr(&flat, &SfrOptions::default()).is_err());
-        let d: Vec<f64> = (0..32 * 32)
-            .map(|i| if i % 32 < 16 { 0.1 } else { 0.9 })
-            .collect();
-        let e = sfr(&Plane::new(32, 32, d).unwrap(), &SfrOptions::default())
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("too close to the pixel grid"), "{e}");
-    }
-}
+mod tests;

@@ -1,0 +1,443 @@
+//! Unit tests of the e-SFR's parts, each against values worked out by hand
+//! from its definition (the whole measurement is tested against analytic
+//! MTFs in `tests/measure_sfr.rs`).
+
+use super::*;
+
+fn close(a: f64, b: f64, tol: f64) -> bool {
+    (a - b).abs() <= tol
+}
+
+/// An `Sfr` holding the given MTF table and ESF/LSF, other fields plain.
+fn sfr_with(freq: &[f64], mtf: &[f64], se: &[f64], pitch: Option<f64>) -> Sfr {
+    Sfr {
+        freq_cy_per_px: freq.to_vec(),
+        mtf: mtf.to_vec(),
+        mtf_stderr: se.to_vec(),
+        esf_x_px: vec![],
+        esf: vec![],
+        lsf: vec![],
+        mtf50_cy_per_px: Some(0.2),
+        mtf50_stderr: 0.01,
+        edge_angle_deg: 5.0,
+        edge_angle_stderr_deg: 0.1,
+        lsf_fwhm_stderr_px: 0.05,
+        rows_used: 64,
+        noise_floor_nyquist: 0.03,
+        noise_floor: vec![0.0, 0.01, 0.02, 0.03, 0.04],
+        noise_floor_stderr: 0.004,
+        transposed: false,
+        pixel_pitch_m: pitch,
+    }
+}
+
+#[test]
+fn hamming_window_peaks_at_mid() {
+    let w = ahamming(11, 5.0);
+    assert!(
+        (w[5] - 1.0).abs() < 1e-12 && (w[0] - 0.08).abs() < 1e-12 && (w[10] - 0.08).abs() < 1e-12
+    );
+}
+
+#[test]
+fn rejects_flat_and_axis_aligned_edges() {
+    let flat = Plane::new(32, 32, vec![1.0; 1024]).unwrap();
+    assert!(sfr(&flat, &SfrOptions::default()).is_err());
+    let d: Vec<f64> = (0..32 * 32)
+        .map(|i| if i % 32 < 16 { 0.1 } else { 0.9 })
+        .collect();
+    let e = sfr(&Plane::new(32, 32, d).unwrap(), &SfrOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("too close to the pixel grid"), "{e}");
+}
+
+#[test]
+fn channel_names_parse() {
+    for s in ["lum", "Y", "luminance"] {
+        assert_eq!(SfrChannel::parse(s).unwrap(), SfrChannel::Lum);
+    }
+    for s in ["r", "G", "b", "w"] {
+        assert_eq!(
+            SfrChannel::parse(s).unwrap(),
+            SfrChannel::Named(s.to_ascii_lowercase())
+        );
+    }
+    assert!(
+        SfrChannel::parse("x")
+            .unwrap_err()
+            .to_string()
+            .contains("'x'")
+    );
+}
+
+#[test]
+fn mtf_is_interpolated_linearly_between_frequencies() {
+    let s = sfr_with(&[0.0, 0.1, 0.3], &[1.0, 0.8, 0.4], &[0.0, 0.01, 0.03], None);
+    let (m, se) = s.mtf_at(0.2).unwrap();
+    assert!(close(m, 0.6, 1e-15) && close(se, 0.02, 1e-15), "{m} {se}");
+    let (m, se) = s.mtf_at(0.125).unwrap();
+    assert!(
+        close(m, 0.75, 1e-15) && close(se, 0.0125, 1e-15),
+        "{m} {se}"
+    );
+    assert_eq!(s.mtf_at(0.0).unwrap(), (1.0, 0.0));
+    assert_eq!(s.mtf_at(-0.1).unwrap(), (1.0, 0.0));
+    assert_eq!(s.mtf_at(0.3).unwrap(), (0.8 + (0.4 - 0.8), 0.03));
+    assert!(s.mtf_at(0.3 + 1e-12).is_none());
+    assert_eq!(s.freq_cy_per_mm(), None);
+    let s = sfr_with(
+        &[0.0, 0.1, 0.3],
+        &[1.0, 0.8, 0.4],
+        &[0.0, 0.01, 0.03],
+        Some(2e-6),
+    );
+    // 2 µm pixels: 1 cy/px = 500 cy/mm.
+    let f = s.freq_cy_per_mm().unwrap();
+    for (g, w) in f.iter().zip([0.0, 50.0, 150.0]) {
+        assert!(close(*g, w, 1e-9), "{f:?}");
+    }
+}
+
+/// The figures of one edge: MTF50 in cy/px and (with a pitch) cy/mm, the MTF
+/// at ⅛, ¼ and ½ cy/px, the noise floor, the edge angle and the LSF width,
+/// each with its standard error; the curves up to Nyquist in cy/mm and the
+/// LSF in µm.
+#[test]
+fn figures_and_curves_carry_values_units_and_errors() {
+    let freq = [0.0, 0.125, 0.25, 0.5, 0.75];
+    let mut s = sfr_with(
+        &freq,
+        &[1.0, 0.9, 0.7, 0.3, 0.1],
+        &[0.0, 0.01, 0.02, 0.03, 0.04],
+        Some(2e-6),
+    );
+    // A triangular LSF of FWHM 1 px on a ¼-px grid.
+    s.esf_x_px = (0..41).map(|i| (i as f64 - 20.0) * 0.25).collect();
+    s.lsf = s
+        .esf_x_px
+        .iter()
+        .map(|x| (1.0 - x.abs()).max(0.0))
+        .collect();
+    s.esf = s
+        .esf_x_px
+        .iter()
+        .map(|x| if *x < 0.0 { 0.0 } else { 1.0 })
+        .collect();
+    let m = s.measured("sfr", Rect::new(1, 2, 3, 4));
+    let fig = |q: &str| {
+        m.figures
+            .iter()
+            .find(|f| f.quantity == q)
+            .unwrap_or_else(|| panic!("no {q}"))
+            .clone()
+    };
+    let f = fig("mtf50");
+    assert_eq!((f.value, f.stderr, f.unit.as_str()), (0.2, 0.01, "cy/px"));
+    let f = fig("mtf50_mm");
+    assert!(close(f.value, 100.0, 1e-9) && close(f.stderr, 5.0, 1e-9));
+    assert_eq!(f.unit, "cy/mm");
+    for (q, v, se) in [
+        ("mtf@0.125cy/px", 0.9, 0.01),
+        ("mtf@0.25cy/px", 0.7, 0.02),
+        ("mtf@0.5cy/px", 0.3, 0.03),
+    ] {
+        let f = fig(q);
+        assert_eq!((f.value, f.stderr), (v, se), "{q}");
+    }
+    let f = fig("mtf_noise@0.5cy/px");
+    assert_eq!((f.value, f.stderr), (0.03, 0.004));
+    let f = fig("edge_angle");
+    assert_eq!((f.value, f.stderr, f.unit.as_str()), (5.0, 0.1, "deg"));
+    let f = fig("lsf_fwhm");
+    assert!(close(f.value, 1.0, 1e-12) && f.stderr == 0.05, "{f:?}");
+    assert_eq!(m.figures.len(), 8);
+    assert_eq!(m.pixels_read, vec![Rect::new(1, 2, 3, 4)]);
+
+    let curve = |n: &str| m.curves.iter().find(|c| c.name == n).unwrap().clone();
+    let mtf = curve("mtf");
+    assert_eq!(mtf.x_unit, "cy/mm");
+    assert_eq!(mtf.x, vec![0.0, 62.5, 125.0, 250.0]);
+    assert_eq!(mtf.y, vec![1.0, 0.9, 0.7, 0.3]);
+    assert_eq!(mtf.stderr, vec![0.0, 0.01, 0.02, 0.03]);
+    assert_eq!(curve("mtf#noise floor").y, vec![0.0, 0.01, 0.02, 0.03]);
+    let lsf = curve("lsf");
+    assert_eq!((lsf.x_unit.as_str(), lsf.y_unit.as_str()), ("µm", "1/µm"));
+    // The peak: 1/px = 0.5/µm at x = 0.
+    let k = lsf.x.iter().position(|x| *x == 0.0).unwrap();
+    assert!(close(lsf.y[k], 0.5, 1e-12));
+    assert_eq!(curve("esf").x, s.esf_x_px);
+
+    // Without a pitch: no cy/mm figure, curves in px.
+    s.pixel_pitch_m = None;
+    let m = s.measured("sfr", Rect::new(1, 2, 3, 4));
+    assert!(m.figures.iter().all(|f| f.quantity != "mtf50_mm"));
+    let mtf = m.curves.iter().find(|c| c.name == "mtf").unwrap();
+    assert_eq!((mtf.x_unit.as_str(), mtf.x[3]), ("cy/px", 0.5));
+    let lsf = m.curves.iter().find(|c| c.name == "lsf").unwrap();
+    assert_eq!(lsf.x_unit, "px");
+    // No MTF50: neither MTF50 figure.
+    s.mtf50_cy_per_px = None;
+    let m = s.measured("sfr", Rect::new(1, 2, 3, 4));
+    assert!(m.figures.iter().all(|f| !f.quantity.starts_with("mtf50")));
+}
+
+/// A sharp step at x = 0 on a ¼-px grid from −20 to +20 px: smoothed over
+/// 17 bins, the normalised ESF rises linearly from bin 72 to bin 88, so it
+/// passes ½ at bin 80, is ≤ 10 % at bin 72 (1/17) and ≥ 90 % at bin 87
+/// (16/17): rise 15 bins = 3.75 px, pad 2·3.75 + 4 = 11.5 px, span
+/// (x₇₂ − 11.5, x₈₇ + 11.5) = (−13.5, 13.25) px — for a falling edge too.
+#[test]
+fn lsf_span_brackets_the_rise_with_its_padding() {
+    let mut s = sfr_with(&[0.0], &[1.0], &[0.0], None);
+    s.esf_x_px = (0..161).map(|i| (i as f64 - 80.0) * 0.25).collect();
+    s.esf = (0..161).map(|i| if i < 80 { 0.0 } else { 1.0 }).collect();
+    assert_eq!(s.lsf_span(), (-13.5, 13.25));
+    s.esf = s.esf.iter().map(|v| 2.0 - 3.0 * v).collect();
+    assert_eq!(s.lsf_span(), (-13.5, 13.25));
+    // The span stops at the data's ends.
+    s.esf_x_px = (0..161).map(|i| (i as f64 - 80.0) * 0.05).collect();
+    s.esf = (0..161).map(|i| if i < 80 { 0.0 } else { 1.0 }).collect();
+    assert_eq!(s.lsf_span(), (-4.0, 4.0));
+    // Flat: all of it; fewer than 8 samples: all of it.
+    s.esf = vec![1.0; 161];
+    assert_eq!(s.lsf_span(), (-4.0, 4.0));
+    s.esf_x_px = vec![-1.0, 0.0, 2.0];
+    s.esf = vec![0.0, 1.0, 1.0];
+    assert_eq!(s.lsf_span(), (-1.0, 2.0));
+}
+
+/// Piecewise-linear peaks are measured exactly: a triangle of half-widths
+/// 1 and 2 px at half height has FWHM 0.5 + 1 = 1.5 px; a peak at the first
+/// sample has its left edge there.
+#[test]
+fn fwhm_of_triangles() {
+    let x: Vec<f64> = (0..41).map(|i| (i as f64 - 16.0) * 0.25).collect();
+    let tri = |l: f64, r: f64| -> Vec<f64> {
+        x.iter()
+            .map(|&x| {
+                if x < 0.0 {
+                    (1.0 + x / l).max(0.0)
+                } else {
+                    (1.0 - x / r).max(0.0)
+                }
+            })
+            .collect()
+    };
+    assert!(close(fwhm(&x, &tri(1.0, 2.0)), 1.5, 1e-12));
+    assert!(close(fwhm(&x, &tri(1.3, 1.3)), 1.3, 1e-12));
+    let y: Vec<f64> = tri(1.0, 2.0).iter().map(|v| 3.0 * v).collect();
+    assert!(close(fwhm(&x, &y), 1.5, 1e-12));
+    let edge: Vec<f64> = x
+        .iter()
+        .map(|&v| (1.0 - (v + 4.0) / 2.0).max(0.0))
+        .collect();
+    assert!(close(fwhm(&x, &edge), 1.0, 1e-12), "{}", fwhm(&x, &edge));
+    // Never falling to half on the right: the right edge is the last sample.
+    let ramp: Vec<f64> = x.iter().map(|&v| (v + 4.0).min(2.0)).collect();
+    assert!(
+        close(fwhm(&x, &ramp), 6.0 - (-3.0), 1e-12),
+        "{}",
+        fwhm(&x, &ramp)
+    );
+}
+
+/// sfrmat's asymmetric window: 0.54 + 0.46·cos(π(i − mid)/wid), wid the
+/// longer side, so it reaches 0.08 only at the far end.
+#[test]
+fn asymmetric_hamming_window() {
+    let w = ahamming(11, 3.0);
+    for (i, v) in w.iter().enumerate() {
+        let want = 0.54 + 0.46 * (std::f64::consts::PI * (i as f64 - 3.0) / 7.0).cos();
+        assert!(close(*v, want, 1e-15), "{i}");
+    }
+    assert!(close(w[10], 0.08, 1e-15) && w[0] > 0.4);
+    assert_eq!(ahamming(1, 0.0), vec![1.0]);
+}
+
+/// The edge polynomial reproduces a cubic exactly, with its slope, however
+/// far the rows are from zero (the fit is in a scaled variable).
+#[test]
+fn edge_fit_reproduces_a_cubic_and_its_slope() {
+    let x = |y: f64| 2.0 + 0.1 * y + 0.01 * y * y - 0.001 * y * y * y;
+    let dx = |y: f64| 0.1 + 0.02 * y - 0.003 * y * y;
+    for off in [0.0, 100.0] {
+        let ys: Vec<f64> = (0..21).map(|i| off + i as f64).collect();
+        let xs: Vec<f64> = ys.iter().map(|&y| x(y - off)).collect();
+        let f = EdgeFit::fit(&ys, &xs, 3).unwrap();
+        for y in [3.3, 7.0, 18.9] {
+            assert!(close(f.x(off + y), x(y), 1e-9), "{off} {y}");
+            assert!(close(f.slope(off + y), dx(y), 1e-9), "{off} {y}");
+        }
+        assert!(close(f.y0, off + 10.0, 1e-12) && close(f.ys, 10.0, 1e-12));
+    }
+    // A straight edge needs 3 rows; 2 are refused.
+    assert!(EdgeFit::fit(&[0.0, 1.0], &[0.0, 1.0], 1).is_none());
+    let f = EdgeFit::fit(&[0.0, 1.0, 2.0], &[1.0, 1.5, 2.0], 1).unwrap();
+    assert!(close(f.x(4.0), 3.0, 1e-12) && close(f.slope(9.0), 0.5, 1e-12));
+    // A single row's scale is 1, not 0.
+    assert_eq!(EdgeFit::fit(&[5.0; 4], &[1.0; 4], 0).unwrap().ys, 1.0);
+}
+
+/// A single-channel plane is located as is; a mosaic by its 2×2 means,
+/// whose samples sit half a pixel in.
+#[test]
+fn locate_plane_of_a_mosaic_is_its_2x2_mean() {
+    let data: Vec<f64> = (0..12).map(|i| i as f64).collect();
+    let p = Plane::new(4, 3, data.clone()).unwrap();
+    assert_eq!(locate_plane(&p), (4, 3, data.clone(), 0.0));
+    let mut m = p.clone();
+    m.channel = vec![0, 1, 0, 1, 1, 2, 1, 2, 0, 1, 0, 1];
+    m.channel_names = vec!["r".into(), "g".into(), "b".into()];
+    let (w, h, d, off) = locate_plane(&m);
+    assert_eq!((w, h, off), (3, 2, 0.5));
+    // Mean of (x, y), (x+1, y), (x, y+1), (x+1, y+1) = 4y + x + 2.5.
+    assert_eq!(d, vec![2.5, 3.5, 4.5, 6.5, 7.5, 8.5]);
+}
+
+#[test]
+fn gradient_energy_is_the_mean_absolute_difference() {
+    // d = 2x − 3y on 4×3: |Δx| = 2, |Δy| = 3 everywhere.
+    let d: Vec<f64> = (0..12)
+        .map(|i| 2.0 * (i % 4) as f64 - 3.0 * (i / 4) as f64)
+        .collect();
+    assert_eq!(gradient_energy(4, 3, &d), (2.0, 3.0));
+    // One jump of 6 in x among 3·3 differences, none in y among 4·2.
+    let d: Vec<f64> = (0..12).map(|i| if i % 4 < 2 { 0.0 } else { 6.0 }).collect();
+    assert_eq!(gradient_energy(4, 3, &d), (2.0, 0.0));
+}
+
+/// A step between samples k and k+1 has its derivative at k + ½ (+ offset);
+/// two equal steps under a window centred between them, midway; the wrong
+/// sign or no edge gives none.
+#[test]
+fn row_centroid_finds_the_step() {
+    let row = [0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0];
+    assert!(close(
+        row_centroid(&row, 1.0, None, 0.0).unwrap(),
+        3.5,
+        1e-12
+    ));
+    assert!(close(
+        row_centroid(&row, 1.0, Some(3.0), 0.25).unwrap(),
+        3.75,
+        1e-12
+    ));
+    let falling: Vec<f64> = row.iter().map(|v| 1.0 - v).collect();
+    assert!(close(
+        row_centroid(&falling, -1.0, None, 0.0).unwrap(),
+        3.5,
+        1e-12
+    ));
+    assert!(row_centroid(&row, -1.0, None, 0.0).is_none());
+    assert!(row_centroid(&[1.0; 8], 1.0, None, 0.0).is_none());
+    let two = [0.0, 0.0, 0.0, 1.0, 2.0, 2.0, 2.0];
+    assert!(close(
+        row_centroid(&two, 1.0, Some(2.5), 0.0).unwrap(),
+        3.0,
+        1e-12
+    ));
+    // An off-centre window weights the nearer step more: centroid moves toward it.
+    assert!(row_centroid(&two, 1.0, Some(1.0), 0.0).unwrap() < 3.0);
+}
+
+#[test]
+fn bin_variances_are_unbiased_sample_variances() {
+    // Bin 2 holds {1, 2, 3} (variance 1), bin 3 {5, 5} (0), bin 1 one sample.
+    let v = bin_variances(
+        &[0.0, 4.0, 6.0, 10.0],
+        &[0.0, 16.0, 14.0, 50.0],
+        &[0, 1, 3, 2],
+    );
+    assert_eq!(v, vec![0.0, 0.0, 1.0, 0.0]);
+    // Rounding below zero is clamped.
+    let v = bin_variances(&[0.3], &[0.045 - 1e-17], &[2]);
+    assert_eq!(v, vec![0.0]);
+}
+
+#[test]
+fn edge_contrast_is_the_plateaus_difference() {
+    let mut esf = vec![1.0, 3.0];
+    esf.extend([2.0; 12]);
+    esf.extend([5.0, 7.0]);
+    assert_eq!(edge_contrast(&esf), 4.0);
+    esf.reverse();
+    assert_eq!(edge_contrast(&esf), 4.0);
+    assert_eq!(edge_contrast(&[1.0, 4.0]), 3.0);
+}
+
+#[test]
+fn crossing_is_interpolated_where_the_curve_first_falls_below() {
+    assert!(close(
+        crossing(&[1.0, 0.8, 0.4, 0.2], 0.5).unwrap(),
+        1.75,
+        1e-15
+    ));
+    assert_eq!(crossing(&[1.0, 0.5, 0.4], 0.5), Some(1.0)); // at the level itself
+    assert_eq!(crossing(&[1.0, 0.6, 0.55], 0.5), None);
+    assert_eq!(crossing(&[0.4, 0.3], 0.5), None);
+    // The first fall counts, not a later one.
+    assert!(close(
+        crossing(&[1.0, 0.0, 1.0, 0.0], 0.5).unwrap(),
+        0.5,
+        1e-15
+    ));
+}
+
+/// Bin means sit at their samples' mean position and are interpolated back
+/// to the bin centres; empty bins are filled, the ends held.
+#[test]
+fn bins_are_moved_to_their_centres() {
+    // Bin 0: one sample at +½ bin (value 2); bin 2: two at −½ (mean 3);
+    // bin 3: two at 0 (mean 4); bin 1 empty. Points (0.5, 2), (1.5, 3), (3, 4).
+    let e = fill_bins(&[2.0, 0.0, 6.0, 8.0], &[0.5, 0.0, -1.0, 0.0], &[1, 0, 2, 2]).unwrap();
+    let want = [2.0, 2.5, 3.0 + 0.5 / 1.5, 4.0];
+    for (g, w) in e.iter().zip(want) {
+        assert!(close(*g, w, 1e-15), "{e:?}");
+    }
+    let e = fill_bins(&[0.0, 2.0, 0.0, 4.0, 0.0], &[0.0; 5], &[0, 1, 0, 1, 0]).unwrap();
+    assert_eq!(e, vec![2.0, 2.0, 3.0, 4.0, 4.0]);
+    assert!(fill_bins(&[1.0, 0.0], &[0.0; 2], &[1, 0]).is_none());
+}
+
+/// White noise of variance σ² per bin (one sample each, unit window): the
+/// LSF's noise is Σ aⱼ eⱼ with |aⱼ|² = 4·|z⁻¹ − z|² = 16 sin²ω inside and
+/// 4 at the two bins at each end that enter one difference only, so
+/// E|N|² = σ²·(16 (n − 4) sin²ω + 16), and the floor is its root times the
+/// derivative correction ω/sin ω over the DC sum.
+#[test]
+fn noise_floor_of_white_noise() {
+    let n = 64;
+    let (sigma2, dc) = (0.01, 10.0);
+    let f = noise_floor(&vec![1.0; n], &vec![1; n], &vec![sigma2; n], dc, 6);
+    assert_eq!(f[0], 0.0);
+    for (m, got) in f.iter().enumerate().skip(1) {
+        let w = 2.0 * std::f64::consts::PI * m as f64 / n as f64;
+        let var = sigma2 * (16.0 * (n - 4) as f64 * w.sin().powi(2) + 16.0);
+        let want = var.sqrt() * (w / w.sin()) / dc;
+        assert!(close(*got, want, 1e-12 * want), "m {m}: {got} vs {want}");
+    }
+    // Four samples per bin quarter the variance; no DC, no floor.
+    let g = noise_floor(&vec![1.0; n], &vec![4; n], &vec![sigma2; n], dc, 6);
+    assert!(close(g[3], f[3] / 2.0, 1e-15));
+    assert_eq!(
+        noise_floor(&vec![1.0; n], &vec![1; n], &vec![sigma2; n], 0.0, 6),
+        vec![0.0; 6]
+    );
+}
+
+/// The strip of a plate's box: its central half in width and up to 128 of
+/// its central rows; small boxes keep at least 8 px (or all they have).
+#[test]
+fn edge_strip_is_the_central_half() {
+    assert_eq!(
+        edge_strip(Rect::new(10, 20, 100, 400)),
+        Rect::new(35, 156, 50, 128)
+    );
+    assert_eq!(
+        edge_strip(Rect::new(10, 20, 100, 60)),
+        Rect::new(35, 35, 50, 30)
+    );
+    assert_eq!(edge_strip(Rect::new(0, 0, 20, 12)), Rect::new(5, 2, 10, 8));
+    assert_eq!(edge_strip(Rect::new(0, 0, 10, 6)), Rect::new(2, 0, 8, 6));
+}
