@@ -548,3 +548,6 @@ fn empty_frame(cfg: &SensorConfig, full: (u32, u32), window: Rect) -> SensorFram
         mean_electrons: vec![],
     }
 }
+
+#[cfg(test)]
+mod tests;
