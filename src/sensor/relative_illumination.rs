@@ -326,4 +326,150 @@ mod tests {
             .to_string();
         assert!(e.contains("distance-mm"), "{e}");
     }
+
+    /// Linear between uneven points, held at both ends.
+    #[test]
+    fn table_interpolates_and_holds_its_ends() {
+        let t = super::table(vec![0.5, 1.0, 3.0], vec![1.0, 0.9, 0.5]).unwrap();
+        for (h, want) in [
+            (0.0, 1.0),
+            (0.5, 1.0),
+            (0.75, 0.95),
+            (1.0, 0.9),
+            (2.0, 0.7),
+            (3.0, 0.5),
+            (9.0, 0.5),
+        ] {
+            assert!((t.at(h) - want).abs() < 1e-12, "{h}: {}", t.at(h));
+        }
+        let c = super::RelativeIllumination::CosN {
+            n: 2.5,
+            distance_mm: 2.0,
+        };
+        assert!((c.at(1.0) - (2.0 / 5.0f64.sqrt()).powf(2.5)).abs() < 1e-15);
+        assert_eq!(super::RelativeIllumination::None.at(7.0), 1.0);
+        assert!(super::table(vec![], vec![]).is_err());
+        assert!(super::table(vec![0.0, 0.0], vec![1.0, 1.0]).is_err());
+        assert!(super::table(vec![1.0, 0.5], vec![1.0, 1.0]).is_err());
+        assert!(super::table(vec![-0.1, 0.5], vec![1.0, 1.0]).is_err());
+        assert!(super::table(vec![0.0, 0.5], vec![1.0, -0.1]).is_err());
+        assert!(super::table(vec![0.0, f64::NAN], vec![1.0, 1.0]).is_err());
+        assert!(super::table(vec![0.0, 0.5], vec![1.0, f64::INFINITY]).is_err());
+        assert!(super::table(vec![0.0], vec![0.0]).is_ok());
+    }
+
+    /// Each mistake in the block is refused at its place with what was expected.
+    #[test]
+    fn malformed_blocks_are_refused_with_the_reason() {
+        let refuse = |s: &str, expect: &str| {
+            let e = parse(s).unwrap_err().to_string();
+            assert!(e.contains("t.kdl") && e.contains(expect), "{s} → {e}");
+        };
+        refuse("relative-illumination\n", "one model name");
+        refuse(
+            "relative-illumination \"none\" \"cos-n\"\n",
+            "one model name",
+        );
+        refuse("relative-illumination 4\n", "model is a string");
+        refuse(
+            "relative-illumination \"cosn\" n=4\n",
+            "unknown relative-illumination model",
+        );
+        refuse(
+            "relative-illumination \"none\" n=4\n",
+            "not a property of model 'none'",
+        );
+        refuse(
+            "relative-illumination \"cos-n\" distance-mm=4\n",
+            "needs n=",
+        );
+        refuse(
+            "relative-illumination \"cos-n\" n=4\n",
+            "needs distance-mm=",
+        );
+        refuse(
+            "relative-illumination \"cos-n\" n=\"4\" distance-mm=4\n",
+            "expects a number",
+        );
+        refuse(
+            "relative-illumination \"cos-n\" n=-1 distance-mm=4\n",
+            "n ≥ 0",
+        );
+        refuse(
+            "relative-illumination \"cos-n\" n=4 distance-mm=0\n",
+            "distance-mm > 0",
+        );
+        refuse("relative-illumination \"table\"\n", "needs file=");
+        refuse("relative-illumination \"table\" file=3\n", "path string");
+        refuse(
+            "relative-illumination \"table\" file=\"ri.csv\" {\n point field-height-mm=0 value=1\n}\n",
+            "not both",
+        );
+        refuse(
+            "relative-illumination \"table\" {\n pt field-height-mm=0 value=1\n}\n",
+            "found 'pt'",
+        );
+        refuse(
+            "relative-illumination \"table\" {\n point field-height-mm=0\n}\n",
+            "needs value=",
+        );
+        refuse(
+            "relative-illumination \"table\" {\n point field-height-mm=0 valu=1\n}\n",
+            "takes field-height-mm",
+        );
+        refuse(
+            "relative-illumination \"table\" {\n point field-height-mm=0 value=\"1\"\n}\n",
+            "expects a number",
+        );
+        refuse(
+            "relative-illumination \"table\" {\n point field-height-mm=1 value=1\n point field-height-mm=0 value=1\n}\n",
+            "must increase",
+        );
+        // n = 0 is allowed: no fall-off.
+        let c = parse("relative-illumination \"cos-n\" n=0 distance-mm=4\n").unwrap();
+        assert_eq!(c.relative_illumination.at(3.0), 1.0);
+        let c = parse("relative-illumination \"none\"\n").unwrap();
+        assert_eq!(c.relative_illumination, super::RelativeIllumination::None);
+    }
+
+    /// The CSV `camsim lens ri` writes (or Zemax's `y_field_mm` export),
+    /// comments and blank lines skipped, columns found by name.
+    #[test]
+    fn tables_are_read_from_csv() {
+        let dir = tempfile::tempdir().unwrap();
+        let f = dir.path().join("ri.csv");
+        std::fs::write(
+            &f,
+            "# from lens ri\n\nrelative_illumination, y_field_mm\n1.0, 0\n0.5, 2\n",
+        )
+        .unwrap();
+        assert_eq!(
+            super::read_ri_csv(&f).unwrap(),
+            (vec![0.0, 2.0], vec![1.0, 0.5])
+        );
+        let kdl = dir.path().join("s.kdl");
+        let c =
+            SensorConfig::parse("relative-illumination \"table\" file=\"ri.csv\"\n", &kdl).unwrap();
+        assert!((c.relative_illumination.at(1.0) - 0.75).abs() < 1e-12);
+        for (text, expect) in [
+            ("", "empty file"),
+            ("# only a comment\n", "empty file"),
+            ("h,v\n0,1\n", "header must name"),
+            (
+                "field_height_mm,relative_illumination\n0,1\n1,x\n",
+                "data row 2",
+            ),
+            ("field_height_mm,relative_illumination\n0\n", "data row 1"),
+        ] {
+            std::fs::write(&f, text).unwrap();
+            let e = super::read_ri_csv(&f).unwrap_err();
+            assert!(e.contains("ri.csv") && e.contains(expect), "{text:?} → {e}");
+        }
+        std::fs::write(&f, "field_height_mm,relative_illumination\n1,1\n0,1\n").unwrap();
+        let e = SensorConfig::parse("relative-illumination \"table\" file=\"ri.csv\"\n", &kdl)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("s.kdl") && e.contains("must increase"), "{e}");
+        assert!(super::read_ri_csv(&dir.path().join("none.csv")).is_err());
+    }
 }

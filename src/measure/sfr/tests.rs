@@ -441,3 +441,166 @@ fn edge_strip_is_the_central_half() {
     assert_eq!(edge_strip(Rect::new(0, 0, 20, 12)), Rect::new(5, 2, 10, 8));
     assert_eq!(edge_strip(Rect::new(0, 0, 10, 6)), Rect::new(2, 0, 8, 6));
 }
+
+fn request(props: &[(&str, crate::params::Value)]) -> std::result::Result<SfrRequest, ParamError> {
+    let mut p = crate::params::Params::new();
+    for (k, v) in props {
+        p.set(*k, v.clone());
+    }
+    from_params(&crate::params::ParamDict::new(&p, &SCHEMA))
+}
+
+/// Each property's range, at its boundary: the first value allowed arrives,
+/// the last refused is refused.
+#[test]
+fn properties_arrive_within_their_ranges() {
+    use crate::params::Value::{Number as N, String as S};
+    let o = request(&[]).unwrap().options;
+    assert_eq!(o.fit_degree, 1);
+    assert_eq!(o.jackknife_groups, 8);
+    assert_eq!(o.max_freq_cy_per_px, 1.0);
+    assert_eq!(o.max_noise_floor, MAX_NOISE_FLOOR);
+    assert_eq!(o.channel, SfrChannel::Lum);
+    let o = |k: &str, v: crate::params::Value| request(&[(k, v)]).map(|r| r.options);
+    assert_eq!(
+        o("channel", S("g".into())).unwrap().channel,
+        SfrChannel::Named("g".into())
+    );
+    assert_eq!(o("fit-degree", N(5.0)).unwrap().fit_degree, 5);
+    assert!(o("fit-degree", N(6.0)).is_err());
+    assert!(o("fit-degree", N(0.0)).is_err());
+    assert_eq!(o("jackknife-count", N(4.0)).unwrap().jackknife_groups, 4);
+    assert_eq!(o("jackknife-count", N(64.0)).unwrap().jackknife_groups, 64);
+    assert!(o("jackknife-count", N(3.0)).is_err());
+    assert!(o("jackknife-count", N(65.0)).is_err());
+    assert_eq!(o("max-freq-cy-px", N(2.0)).unwrap().max_freq_cy_per_px, 2.0);
+    assert_eq!(o("max-freq-cy-px", N(0.3)).unwrap().max_freq_cy_per_px, 0.3);
+    assert!(o("max-freq-cy-px", N(2.001)).is_err());
+    assert!(o("max-freq-cy-px", N(0.0)).is_err());
+    assert_eq!(
+        o("max-noise-fraction", N(1.0)).unwrap().max_noise_floor,
+        1.0
+    );
+    assert_eq!(
+        o("max-noise-fraction", N(0.2)).unwrap().max_noise_floor,
+        0.2
+    );
+    assert!(o("max-noise-fraction", N(1.001)).is_err());
+}
+
+/// The object's bounding box inset 15 % a side when that is solid label;
+/// further in (5 % steps) when the outline is ragged; refused when no
+/// solid 8×8 interior is left, and when the label is missing.
+#[test]
+fn object_region_is_the_solid_interior() {
+    let names: Vec<String> = vec!["bg".into(), "edge".into()];
+    let (w, h) = (60, 50);
+    // The object fills x 10..=49, y 5..=44 (40 × 40).
+    let mut labels: Vec<u32> = (0..w * h)
+        .map(|i| ((10..50).contains(&(i % w)) && (5..45).contains(&(i / w))) as u32)
+        .collect();
+    // 15 % of 40 = 6: x 16..=43, y 11..=38.
+    assert_eq!(
+        object_roi(&labels, &names, w, h, "edge").unwrap(),
+        Rect::new(16, 11, 28, 28)
+    );
+    // A background hole at (16, 11) and one at (42, 37): the 20 % inset
+    // (x 18..=41, y 13..=36) avoids both.
+    labels[11 * w + 16] = 0;
+    labels[37 * w + 42] = 0;
+    assert_eq!(
+        object_roi(&labels, &names, w, h, "edge").unwrap(),
+        Rect::new(18, 13, 24, 24)
+    );
+    // A hole in the centre: no inset is solid.
+    labels[25 * w + 30] = 0;
+    let e = object_roi(&labels, &names, w, h, "edge")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("no solid interior"), "{e}");
+    // Too small for 8×8 after the inset: 12 × 12 → 14 % … stops at once.
+    let small: Vec<u32> = (0..w * h)
+        .map(|i| ((10..22).contains(&(i % w)) && (5..17).contains(&(i / w))) as u32)
+        .collect();
+    assert!(object_roi(&small, &names, w, h, "edge").is_err());
+    let e = object_roi(&vec![0; w * h], &names, w, h, "edge")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("not visible"), "{e}");
+    assert!(object_roi(&labels, &names, w, h, "egde").is_err());
+    assert!(object_roi(&labels[1..], &names, w, h, "edge").is_err());
+}
+
+/// A sharp edge 5° from the columns (or, `horizontal`, from the rows) through
+/// the centre of a `w` × `h` plane, dark 0.1 → bright 0.9, each pixel its area
+/// average (16 × 16 subsamples).
+fn slanted(w: usize, h: usize, horizontal: bool) -> Plane {
+    let t = 5f64.to_radians().tan();
+    let v = (0..w * h)
+        .map(|i| {
+            let (x, y) = ((i % w) as f64 + 0.5, (i / w) as f64 + 0.5);
+            let (a, b) = if horizontal { (y, x) } else { (x, y) };
+            // Area fraction of the pixel beyond the edge a = 32 + t·(b − 32).
+            let mut f = 0.0;
+            for sy in 0..16 {
+                for sx in 0..16 {
+                    let aa = a - 0.5 + (sx as f64 + 0.5) / 16.0;
+                    let bb = b - 0.5 + (sy as f64 + 0.5) / 16.0;
+                    if aa > 32.0 + t * (bb - 32.0) {
+                        f += 1.0 / 256.0;
+                    }
+                }
+            }
+            0.1 + 0.8 * f
+        })
+        .collect();
+    Plane::new(w, h, v).unwrap()
+}
+
+/// A horizontal edge is measured transposed, with the same MTF as the
+/// vertical one; the options' checks hold.
+#[test]
+fn horizontal_edges_are_transposed_and_options_checked() {
+    let v = sfr(&slanted(64, 64, false), &SfrOptions::default()).unwrap();
+    let h = sfr(&slanted(64, 64, true), &SfrOptions::default()).unwrap();
+    assert!(!v.transposed && h.transposed);
+    assert!(
+        (v.edge_angle_deg.abs() - 5.0).abs() < 0.1,
+        "{}",
+        v.edge_angle_deg
+    );
+    for (a, b) in v.mtf.iter().zip(&h.mtf) {
+        assert!((a - b).abs() < 1e-9, "{a} vs {b}");
+    }
+    // A sharp edge sampled by square pixels: MTF(0.25) = sinc(0.25) = 0.900.
+    let (m, _) = v.mtf_at(0.25).unwrap();
+    assert!((m - 0.9003).abs() < 0.02, "{m}");
+    let small = Plane::new(7, 64, vec![0.5; 7 * 64]).unwrap();
+    assert!(
+        sfr(&small, &SfrOptions::default())
+            .unwrap_err()
+            .to_string()
+            .contains("too small")
+    );
+    let small = Plane::new(64, 7, vec![0.5; 7 * 64]).unwrap();
+    assert!(sfr(&small, &SfrOptions::default()).is_err());
+    for degree in [0, 6] {
+        let o = SfrOptions {
+            fit_degree: degree,
+            ..Default::default()
+        };
+        let e = sfr(&slanted(64, 64, false), &o).unwrap_err().to_string();
+        assert!(e.contains("fit degree"), "{e}");
+    }
+    let o = SfrOptions {
+        channel: SfrChannel::Named("r".into()),
+        ..Default::default()
+    };
+    let e = sfr(&slanted(64, 64, false), &o).unwrap_err().to_string();
+    assert!(e.contains("single-channel"), "{e}");
+    let o = SfrOptions {
+        channel: SfrChannel::Named("g".into()),
+        ..Default::default()
+    };
+    assert!(sfr(&slanted(64, 64, false), &o).is_ok());
+}
