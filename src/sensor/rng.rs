@@ -542,4 +542,95 @@ mod tests {
         let k = PixelRng::new(0, 0, 0).poisson(1e15);
         assert!((k - 1e15).abs() < 1e9, "{k}");
     }
+
+    /// The stream is Steele et al.'s SplitMix64: from state 0 it gives the
+    /// published first outputs of Vigna's reference `splitmix64.c`.
+    #[test]
+    fn splitmix64_reference_outputs() {
+        let mut r = PixelRng { state: 0 };
+        let got: Vec<u64> = (0..4).map(|_| r.next_u64()).collect();
+        assert_eq!(
+            got,
+            [
+                0xE220_A839_7B1D_CDAF,
+                0x6E78_9E6A_A1B9_65F4,
+                0x06C4_5D18_8009_454F,
+                0xF88B_B8A8_724C_81EC
+            ]
+        );
+    }
+
+    /// `keyed_output(k, i, n)` is the n-th output of `keyed(k, i)`, and the
+    /// uniforms built from outputs are those of the stream.
+    #[test]
+    fn direct_outputs_are_the_streams() {
+        for (key, item) in [(0u64, 0u64), (PixelRng::stream_key(7, stream::READ), 12345)] {
+            let mut r = PixelRng::keyed(key, item);
+            for n in 1..=6 {
+                let bits = PixelRng::keyed_output(key, item, n);
+                assert_eq!(bits, r.clone().next_u64(), "n = {n}");
+                assert_eq!(uniform_from_bits(bits), r.uniform());
+            }
+        }
+        // 53 bits: the largest uniform is 1 − 2⁻⁵³, never 1.
+        assert_eq!(uniform_from_bits(u64::MAX), 1.0 - f64::EPSILON / 2.0);
+        assert_eq!(uniform_from_bits(0), 0.0);
+    }
+
+    /// Where the vectorisable first step accepts, it gives what `normal`
+    /// gives; where it does not, `normal` needed more than the rectangle
+    /// (≈ 1 % of draws; at least one in 10⁴ here).
+    #[test]
+    fn fast_normal_agrees_with_normal() {
+        let z = ziggurat_x();
+        let key = PixelRng::stream_key(3, stream::READ);
+        let mut rejected = 0;
+        for i in 0..10_000u64 {
+            let (x, ok) = PixelRng::normal_fast(PixelRng::keyed_output(key, i, 1), z);
+            let full = PixelRng::keyed(key, i).normal();
+            if ok {
+                assert_eq!(x, full, "{i}");
+            } else {
+                rejected += 1;
+            }
+        }
+        assert!(rejected > 0 && rejected < 300, "{rejected}");
+    }
+
+    /// PTRS split in two (`first`, then `rest` when the fast test fails) is
+    /// exactly `poisson` on the same stream.
+    #[test]
+    fn split_ptrs_is_poisson() {
+        for mu in [10.0, 37.5, 1000.0] {
+            let mut rejected = 0;
+            for i in 0..5_000u64 {
+                let want = PixelRng::new(9, stream::PHOTON, i).poisson(mu);
+                let mut r = PixelRng::new(9, stream::PHOTON, i);
+                let p = r.poisson_ptrs_first(mu);
+                let got = if p.accepted {
+                    p.k
+                } else {
+                    rejected += 1;
+                    r.poisson_ptrs_rest(mu, p)
+                };
+                assert_eq!(got, want, "μ {mu}, stream {i}");
+            }
+            assert!(rejected > 0, "μ {mu}");
+        }
+    }
+
+    /// Sequential inversion at a tiny mean: P(0) = e^−μ, so almost every
+    /// draw is 0; at μ = 1e-300 the underflow guard still ends the search.
+    #[test]
+    fn poisson_at_tiny_means() {
+        let zeros = (0..10_000u64)
+            .filter(|&i| PixelRng::new(1, stream::PHOTON, i).poisson(1e-3) == 0.0)
+            .count();
+        // Expected 9990, binomial σ ≈ 3.2.
+        assert!(zeros >= 9975, "{zeros}");
+        for i in 0..1000u64 {
+            let k = PixelRng::new(2, stream::PHOTON, i).poisson(1e-300);
+            assert!(k == 0.0 || k == 1.0, "{k}");
+        }
+    }
 }
