@@ -540,13 +540,18 @@ fn slanted(w: usize, h: usize, horizontal: bool) -> Plane {
         .map(|i| {
             let (x, y) = ((i % w) as f64 + 0.5, (i / w) as f64 + 0.5);
             let (a, b) = if horizontal { (y, x) } else { (x, y) };
-            // Area fraction of the pixel beyond the edge a = 32 + t·(b − 32).
+            let (ca, cb) = if horizontal {
+                (h as f64 / 2.0, w as f64 / 2.0)
+            } else {
+                (w as f64 / 2.0, h as f64 / 2.0)
+            };
+            // Area fraction of the pixel beyond the edge a = ca + t·(b − cb).
             let mut f = 0.0;
             for sy in 0..16 {
                 for sx in 0..16 {
                     let aa = a - 0.5 + (sx as f64 + 0.5) / 16.0;
                     let bb = b - 0.5 + (sy as f64 + 0.5) / 16.0;
-                    if aa > 32.0 + t * (bb - 32.0) {
+                    if aa > ca + t * (bb - cb) {
                         f += 1.0 / 256.0;
                     }
                 }
@@ -603,4 +608,109 @@ fn horizontal_edges_are_transposed_and_options_checked() {
         ..Default::default()
     };
     assert!(sfr(&slanted(64, 64, false), &o).is_ok());
+}
+
+/// A 96 × 96 mono capture of the edge (64 DV black level, 1000 DV step),
+/// at (10, 5) in a 200 × 150 frame, with the object "edge" labelled over
+/// window pixels x 16..80, y 8..88.
+fn edge_capture() -> crate::image::SensorImage {
+    let p = slanted(96, 96, false);
+    let dv: Vec<u16> = p
+        .data
+        .iter()
+        .map(|v| (64.0 + 1000.0 * (v - 0.1) / 0.8).round() as u16)
+        .collect();
+    let cfa = crate::image::CfaPattern::bayer("mono").unwrap();
+    let mut si = crate::image::SensorImage::from_raw_dv(96, 96, &cfa, &dv, 64.0, 4095.0);
+    (si.full_width, si.full_height) = (200, 150);
+    si.window = Rect::new(10, 5, 96, 96);
+    si.label_names = vec!["bg".into(), "edge".into()];
+    si.labels = (0..96 * 96)
+        .map(|i| ((16..80).contains(&(i % 96)) && (8..88).contains(&(i / 96))) as u32)
+        .collect();
+    si
+}
+
+fn run(of: &[&str], roi: Option<Rect>, rects: &[(&str, Rect)]) -> Result<Measured> {
+    let si = edge_capture();
+    let of: Vec<String> = of.iter().map(|s| s.to_string()).collect();
+    let object_rects = rects.iter().map(|(k, r)| (k.to_string(), *r)).collect();
+    let grid = crate::spectrum::WavelengthGrid::new(400.0, 700.0, 10.0).unwrap();
+    let inp = crate::measure::inputs::Inputs {
+        oi: None,
+        si: Some(&si),
+        sensor: None,
+        object_rects: &object_rects,
+        seed: 1,
+        grid: &grid,
+    };
+    let r = SfrRequest {
+        roi_px: roi,
+        ..Default::default()
+    };
+    run_on_sensor("sfr", &of, &r, &si, &inp)
+}
+
+/// Where the region comes from: the render stage's strip for the object
+/// (full-frame → window pixels), else the central strip of its label box,
+/// else `roi-px`; figures prefixed by the object (or `roi`), the pixel
+/// pitch giving cy/mm.
+#[test]
+fn on_a_sensor_image_the_region_follows_the_object() {
+    let m = run(&["edge"], None, &[]).unwrap();
+    // Label box (16, 8, 64, 80) → its strip (32, 28, 32, 40).
+    assert_eq!(m.pixels_read, vec![Rect::new(32, 28, 32, 40)]);
+    let q: Vec<&str> = m.figures.iter().map(|f| f.quantity.as_str()).collect();
+    assert!(
+        q.contains(&"edge/mtf50") && q.contains(&"edge/mtf50_mm"),
+        "{q:?}"
+    );
+    let m50 = m
+        .figures
+        .iter()
+        .find(|f| f.quantity == "edge/mtf50")
+        .unwrap()
+        .value;
+    let mm = m
+        .figures
+        .iter()
+        .find(|f| f.quantity == "edge/mtf50_mm")
+        .unwrap()
+        .value;
+    // 1 µm pixels: 1 cy/px = 1000 cy/mm.
+    assert!((mm / m50 - 1000.0).abs() < 1e-9);
+    assert!(m.curves.iter().all(|c| c.name.starts_with("edge/")));
+    let m = run(&["edge"], None, &[("edge", Rect::new(40, 25, 36, 50))]).unwrap();
+    assert_eq!(m.pixels_read, vec![Rect::new(30, 20, 36, 50)]);
+    let m = run(&[], Some(Rect::new(40, 25, 36, 50)), &[]).unwrap();
+    assert_eq!(m.pixels_read, vec![Rect::new(30, 20, 36, 50)]);
+    assert!(m.figures.iter().all(|f| f.quantity.starts_with("roi/")));
+    let m = run(&["edge"], Some(Rect::new(40, 25, 36, 50)), &[]).unwrap();
+    assert!(m.figures.iter().all(|f| f.quantity.starts_with("edge/")));
+}
+
+#[test]
+fn on_a_sensor_image_a_missing_region_is_an_error() {
+    let e = |r: Result<Measured>| r.map(|_| ()).unwrap_err().to_string();
+    let msg = e(run(&["a", "b"], Some(Rect::new(40, 25, 36, 50)), &[]));
+    assert!(
+        msg.contains("roi-px names one region but of= names 2"),
+        "{msg}"
+    );
+    let msg = e(run(&[], None, &[]));
+    assert!(msg.contains("sfr needs of="), "{msg}");
+    let msg = e(run(&["plate"], None, &[]));
+    assert!(
+        msg.contains("object 'plate' is not in the measured image"),
+        "{msg}"
+    );
+    let msg = e(run(
+        &["edge"],
+        None,
+        &[("edge", Rect::new(150, 120, 10, 10))],
+    ));
+    assert!(msg.contains("outside the rendered window"), "{msg}");
+    // A flat region: the error names the measurement and the edge.
+    let msg = e(run(&[], Some(Rect::new(12, 60, 20, 20)), &[]));
+    assert!(msg.contains("measurement 'sfr', edge 'roi'"), "{msg}");
 }
