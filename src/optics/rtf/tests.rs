@@ -134,8 +134,13 @@ fn ellipse_pass_region_and_its_box() {
         assert!(close(*g, w, 1e-14), "{b:?}");
     }
     assert!(p.bbox(3.5).is_none());
-    // Farthest any listed ellipse reaches: centre 4 + semi-axis 1.1.
+    // Farthest any listed ellipse reaches: centre 4 + semi-axis 1.1 (radial);
+    // with a wider last ellipse, 0.6 + 6 (tangential).
     assert!(close(p.reach(0.0), 5.1, 1e-14));
+    let mut wide = ellipses();
+    wide.radii_x_mm[2] = 6.0;
+    wide.centers_x_mm[2] = -0.6;
+    assert!(close(PassNoPass::Ellipses(wide).reach(0.0), 6.6, 1e-14));
 }
 
 #[test]
@@ -168,11 +173,15 @@ fn circle_pass_region_and_its_box() {
     c.sensitivities = vec![0.0, 1.0];
     c.radii_mm = vec![1.0, 0.5];
     assert!(close(
-        PassNoPass::Circles(c.clone()).reach(-2.0),
+        PassNoPass::Circles(c.clone()).reach(-4.0),
         1.0,
         1e-14
     ));
-    // Disjoint circles: no region.
+    // The second circle nearer: |0.1 · 2| + 0.5 = 0.7.
+    c.sensitivities = vec![0.0, 0.1];
+    assert!(close(PassNoPass::Circles(c.clone()).reach(2.0), 0.7, 1e-14));
+    // Disjoint circles (centres 0 and 1 at r = 1, radii 0.1): no region.
+    c.sensitivities = vec![0.0, 1.0];
     c.radii_mm = vec![0.1, 0.1];
     assert!(PassNoPass::Circles(c.clone()).bbox(1.0).is_none());
     c.max_input_radius_mm = None;
