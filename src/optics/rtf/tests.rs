@@ -558,3 +558,44 @@ fn malformed_files_are_refused_with_the_reason() {
     v["polynomials"][0]["poly"][0]["termdy"] = json!([63]);
     assert!(Rtf::from_value(&v, Path::new("t.json")).is_ok());
 }
+
+/// An output point that overflows (outx = 1e308·r² at r = 10 mm) makes no
+/// ray, though its direction is fine.
+#[test]
+fn overflowing_outputs_make_no_ray() {
+    let mut rtf = lens();
+    rtf.waves[0].outputs[0] = Some(poly(&[([2, 0, 0], 1e308)]));
+    let w = &rtf.waves[0];
+    assert!(rtf.transfer(w, 0.0, 10.0, DVec3::Z).is_none());
+    assert!(rtf.transfer(w, 0.0, 1e-200, DVec3::Z).is_some());
+}
+
+/// The sampling box is the pass region's box (the union over 9 input radii
+/// within ±δ of the film point's) grown by 2 % of its size and by δ, with
+/// δ = 1.05·g·(ρ + reach)/h: g the film-to-input-plane distance, h the
+/// film-to-pass-plane distance, reach the farthest any pass region goes.
+/// For a centred disk of radius R every radius has the box [−R, R]², so the
+/// sampling box is [−R − m, R + m]², m = 0.04·R + δ. Beyond the largest
+/// input radius by more than δ there is no box.
+#[test]
+fn sampling_box_is_the_pass_box_with_its_margins() {
+    let mut rtf = lens();
+    rtf.waves[0].pass = PassNoPass::Circles(Circles {
+        radii_mm: vec![0.4],
+        sensitivities: vec![0.0],
+        plane_distance_mm: 2.5,
+        max_input_radius_mm: Some(2.0),
+    });
+    let cam = RtfCamera::new(rtf, 0.6).unwrap();
+    let w = &cam.rtf.waves[0];
+    let (g, h) = (0.1, 0.1 + 2.5);
+    for rho in [0.0, 1.0] {
+        let delta = 1.05 * g * (rho + 0.4) / h;
+        let m = 0.04 * 0.4 + delta;
+        let b = cam.sampling_box(w, rho).unwrap();
+        for (got, want) in b.iter().zip([-0.4 - m, 0.4 + m, -0.4 - m, 0.4 + m]) {
+            assert!(close(*got, want, 1e-12), "ρ {rho}: {b:?}");
+        }
+    }
+    assert!(cam.sampling_box(w, 3.0).is_none());
+}
