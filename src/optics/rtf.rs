@@ -623,19 +623,23 @@ impl RtfCamera {
         let reach_mm = rtf
             .waves
             .iter()
-            .map(|w| {
-                let r_top = w
-                    .pass
-                    .max_radius_mm()
-                    .unwrap_or(10.0 * film_distance_mm.max(rtf.thickness_mm));
-                w.pass.reach(r_top)
-            })
+            .map(|w| Self::reach_of(w, film_distance_mm, rtf.thickness_mm))
             .collect();
         Ok(Self {
             rtf,
             film_distance_mm,
             reach_mm,
         })
+    }
+    /// Farthest any pass region of `w` reaches, over input radii up to its
+    /// largest (or, when unlimited, ten times the film distance or the lens
+    /// thickness, whichever is larger), mm.
+    fn reach_of(w: &RtfWave, film_distance_mm: f64, thickness_mm: f64) -> f64 {
+        let r_top = w
+            .pass
+            .max_radius_mm()
+            .unwrap_or(10.0 * film_distance_mm.max(thickness_mm));
+        w.pass.reach(r_top)
     }
     /// Input plane position (film at 0), mm.
     pub fn input_plane_z_mm(&self) -> f64 {
@@ -652,17 +656,11 @@ impl RtfCamera {
         let g = self.input_plane_z_mm().abs();
         let h = self.input_plane_z_mm() + w.pass.plane_distance_mm();
         // Largest lateral slope reaching any pass region from this film point.
-        let wi = self
-            .rtf
-            .waves
-            .iter()
-            .position(|x| std::ptr::eq(x, w))
-            .unwrap_or(0);
-        let reach = self
-            .reach_mm
-            .get(wi)
-            .copied()
-            .unwrap_or_else(|| w.pass.reach(r_film + g));
+        // (precomputed for the camera's own tables; computed for any other)
+        let reach = match self.rtf.waves.iter().position(|x| std::ptr::eq(x, w)) {
+            Some(i) => self.reach_mm[i],
+            None => Self::reach_of(w, self.film_distance_mm, self.rtf.thickness_mm),
+        };
         let slope = (r_film + reach) / h.abs().max(1e-9);
         let delta = g * slope * 1.05;
         let mut b = [

@@ -598,4 +598,36 @@ fn sampling_box_is_the_pass_box_with_its_margins() {
         }
     }
     assert!(cam.sampling_box(w, 3.0).is_none());
+    // A table that is not the camera's own (a copy) gets the same box.
+    let copy = w.clone();
+    assert_eq!(cam.sampling_box(&copy, 1.0), cam.sampling_box(w, 1.0));
+}
+
+/// The reach bounding the sampling slope: over input radii up to the
+/// largest one, or, when unlimited, up to 10 × max(film distance, thickness)
+/// (here 10 × 4 mm): an off-axis circle (centre 0.1·r, radius 0.5) reaches
+/// 0.1·40 + 0.5 = 4.5 mm, so δ = 1.05·g·(ρ + 4.5)/h.
+#[test]
+fn unlimited_pass_regions_reach_to_ten_lens_lengths() {
+    let mut rtf = lens();
+    rtf.waves[0].pass = PassNoPass::Circles(Circles {
+        radii_mm: vec![0.5],
+        sensitivities: vec![0.1],
+        plane_distance_mm: 2.5,
+        max_input_radius_mm: None,
+    });
+    let cam = RtfCamera::new(rtf, 0.6).unwrap();
+    let w = cam.rtf.waves[0].clone();
+    assert!(close(RtfCamera::reach_of(&w, 0.6, 4.0), 4.5, 1e-12));
+    assert!(close(RtfCamera::reach_of(&w, 7.0, 4.0), 7.5, 1e-12));
+    let (g, h, rho) = (0.1, 2.6, 0.0);
+    let delta = 1.05 * g * (rho + 4.5) / h;
+    // The film point on the axis: input radii 0 … δ; the box is the union of
+    // the circles' boxes, [−0.5, 0.5] × [−0.5, 0.1·δ + 0.5].
+    let b = cam.sampling_box(&w, rho).unwrap();
+    let (x1, y0, y1) = (0.5, -0.5, 0.1 * delta + 0.5);
+    let (mx, my) = (0.02 * 2.0 * x1 + delta, 0.02 * (y1 - y0) + delta);
+    for (got, want) in b.iter().zip([-x1 - mx, x1 + mx, y0 - my, y1 + my]) {
+        assert!(close(*got, want, 1e-12), "{b:?}");
+    }
 }
