@@ -112,12 +112,12 @@ fn figures_and_curves_carry_values_units_and_errors() {
         &[0.0, 0.01, 0.02, 0.03, 0.04],
         Some(2e-6),
     );
-    // A triangular LSF of FWHM 1 px on a ¼-px grid.
+    // A triangular LSF of FWHM 1.5 px on a ¼-px grid.
     s.esf_x_px = (0..41).map(|i| (i as f64 - 20.0) * 0.25).collect();
     s.lsf = s
         .esf_x_px
         .iter()
-        .map(|x| (1.0 - x.abs()).max(0.0))
+        .map(|x| (1.0 - x.abs() / 1.5).max(0.0))
         .collect();
     s.esf = s
         .esf_x_px
@@ -150,7 +150,7 @@ fn figures_and_curves_carry_values_units_and_errors() {
     let f = fig("edge_angle");
     assert_eq!((f.value, f.stderr, f.unit.as_str()), (5.0, 0.1, "deg"));
     let f = fig("lsf_fwhm");
-    assert!(close(f.value, 1.0, 1e-12) && f.stderr == 0.05, "{f:?}");
+    assert!(close(f.value, 1.5, 1e-12) && f.stderr == 0.05, "{f:?}");
     assert_eq!(m.figures.len(), 8);
     assert_eq!(m.pixels_read, vec![Rect::new(1, 2, 3, 4)]);
 
@@ -205,6 +205,25 @@ fn lsf_span_brackets_the_rise_with_its_padding() {
     s.esf_x_px = vec![-1.0, 0.0, 2.0];
     s.esf = vec![0.0, 1.0, 1.0];
     assert_eq!(s.lsf_span(), (-1.0, 2.0));
+    s.esf_x_px = vec![-10.0, -5.0, 0.0, 5.0, 10.0];
+    s.esf = vec![0.0, 0.0, 1.0, 1.0, 1.0];
+    assert_eq!(s.lsf_span(), (-10.0, 10.0));
+}
+
+/// The rise ends where the smoothed ESF reaches 90 %, at it included: a
+/// step 9 bins before the end of 40 (plateaus of 5 bins: 0 and 1) reaches
+/// exactly 9/10 at bin 38, whose window is cut to 10 bins by the end. From
+/// the ½ crossing at bin 31 down to bin 23 (1/17 ≤ 10 %): rise 38 − 23 =
+/// 15 px on a 1-px grid, pad 34 px, span (23 − 34, 39) — the right end
+/// held at the last sample, the first sample placed far out of the way.
+#[test]
+fn lsf_span_rise_ends_at_ninety_percent_inclusive() {
+    let mut s = sfr_with(&[0.0], &[1.0], &[0.0], None);
+    s.esf_x_px = (0..40)
+        .map(|i| if i == 0 { -1000.0 } else { i as f64 })
+        .collect();
+    s.esf = (0..40).map(|i| if i < 31 { 0.0 } else { 1.0 }).collect();
+    assert_eq!(s.lsf_span(), (-11.0, 39.0));
 }
 
 /// Piecewise-linear peaks are measured exactly: a triangle of half-widths
