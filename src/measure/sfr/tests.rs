@@ -252,6 +252,12 @@ fn fwhm_of_triangles() {
         .map(|&v| (1.0 - (v + 4.0) / 2.0).max(0.0))
         .collect();
     assert!(close(fwhm(&x, &edge), 1.0, 1e-12), "{}", fwhm(&x, &edge));
+    // Kinks just past half height on both sides: the crossing is interpolated
+    // in the segment that crosses (2.5 and 5.5), not extrapolated from the
+    // flat one after it.
+    let xk: Vec<f64> = (0..9).map(|i| i as f64).collect();
+    let yk = [0.38, 0.39, 0.4, 0.6, 1.0, 0.6, 0.4, 0.39, 0.38];
+    assert!(close(fwhm(&xk, &yk), 3.0, 1e-12), "{}", fwhm(&xk, &yk));
     // Never falling to half on the right: the right edge is the last sample.
     let ramp: Vec<f64> = x.iter().map(|&v| (v + 4.0).min(2.0)).collect();
     assert!(
