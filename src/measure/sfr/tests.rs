@@ -356,6 +356,14 @@ fn row_centroid_finds_the_step() {
     ));
     assert!(row_centroid(&row, -1.0, None, 0.0).is_none());
     assert!(row_centroid(&[1.0; 8], 1.0, None, 0.0).is_none());
+    // By default the window centres on the middle derivative sample (3 of
+    // 0…6): two equal steps at 2 and 4 balance at 3.5.
+    let even = [0.0, 0.0, 0.0, 1.0, 1.0, 2.0, 2.0, 2.0];
+    assert!(close(
+        row_centroid(&even, 1.0, None, 0.0).unwrap(),
+        3.5,
+        1e-12
+    ));
     let two = [0.0, 0.0, 0.0, 1.0, 2.0, 2.0, 2.0];
     assert!(close(
         row_centroid(&two, 1.0, Some(2.5), 0.0).unwrap(),
