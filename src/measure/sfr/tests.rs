@@ -747,3 +747,17 @@ fn on_a_sensor_image_a_missing_region_is_an_error() {
     let msg = e(run(&[], Some(Rect::new(12, 60, 20, 20)), &[]));
     assert!(msg.contains("measurement 'sfr', edge 'roi'"), "{msg}");
 }
+
+/// The LSF is a density across the edge: on ¼-px bins it integrates to 1
+/// (the normalisation is exact, so only float rounding is allowed), and a
+/// sharp edge on unit pixels spreads it over about one pixel (peak ≈ 1/px).
+#[test]
+fn lsf_has_unit_area_per_pixel() {
+    let s = sfr(&slanted(64, 64, false), &SfrOptions::default()).unwrap();
+    let dx = s.esf_x_px[1] - s.esf_x_px[0];
+    assert!(close(dx, 0.25, 1e-12), "{dx}");
+    let area: f64 = s.lsf.iter().sum::<f64>() * dx;
+    assert!(close(area, 1.0, 1e-9), "{area}");
+    let peak = s.lsf.iter().cloned().fold(f64::MIN, f64::max);
+    assert!(peak > 0.7 && peak < 1.3, "{peak}");
+}
