@@ -166,6 +166,8 @@ fn figures_and_curves_carry_values_units_and_errors() {
     // The peak: 1/px = 0.5/µm at x = 0.
     let k = lsf.x.iter().position(|x| *x == 0.0).unwrap();
     assert!(close(lsf.y[k], 0.5, 1e-12));
+    // ¼ px apart = 0.5 µm at a 2 µm pitch.
+    assert!(close(lsf.x[k + 1], 0.5, 1e-12), "{:?}", lsf.x);
     assert_eq!(curve("esf").x, s.esf_x_px);
 
     // Without a pitch: no cy/mm figure, curves in px.
@@ -224,6 +226,19 @@ fn lsf_span_rise_ends_at_ninety_percent_inclusive() {
         .collect();
     s.esf = (0..40).map(|i| if i < 31 { 0.0 } else { 1.0 }).collect();
     assert_eq!(s.lsf_span(), (-11.0, 39.0));
+}
+
+/// Eight samples are enough to search for the rise: all eight smoothing
+/// windows cover the whole ESF, whose normalised mean here is 0 (a dip below
+/// the dark plateau), so no bin reaches ½; the rise starts at the middle
+/// bin 4 and runs to the end: rise 7 − 4 = 3 px, pad 10 px, span (−6, 7),
+/// not the whole range from the first sample, placed at −1000.
+#[test]
+fn lsf_span_of_eight_samples_is_searched() {
+    let mut s = sfr_with(&[0.0], &[1.0], &[0.0], None);
+    s.esf_x_px = vec![-1000.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0];
+    s.esf = vec![0.0, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0];
+    assert_eq!(s.lsf_span(), (-6.0, 7.0));
 }
 
 /// Piecewise-linear peaks are measured exactly: a triangle of half-widths
