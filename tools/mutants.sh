@@ -70,6 +70,14 @@ if [ "$MODULE" = sfr ] && [ -z "${CARGO_PROFILE_MUTANTS_OPT_LEVEL:-}" ]; then
     export CARGO_PROFILE_MUTANTS_OPT_LEVEL=0
 fi
 
+# A mutant that turns a loop endless (`l -= 1` → `l /= 1`) runs to the
+# timeout: 300 s where the tests take minutes when optimised (rtf, noise), 60 s
+# for sfr, whose unoptimised tests take ~7 s ($MUTANTS_TIMEOUT overrides).
+TIMEOUT="${MUTANTS_TIMEOUT:-300}"
+if [ "$MODULE" = sfr ] && [ -z "${MUTANTS_TIMEOUT:-}" ]; then
+    TIMEOUT=60
+fi
+
 NAME="$MODULE"
 ARGS=()
 if [ -n "$SHARD" ]; then
@@ -89,5 +97,5 @@ for t in "${TESTS[@]}"; do ARGS+=("--cargo-arg=$t"); done
 # is skipped. $MUTANTS_ARGS passes further cargo-mutants options (e.g.
 # --iterate to re-test only what the previous run in $OUT did not catch).
 # shellcheck disable=SC2086
-cargo mutants --in-place --profile mutants --timeout 300 "${ARGS[@]}" ${MUTANTS_ARGS:-} -o "$OUT" \
+cargo mutants --in-place --profile mutants --timeout "$TIMEOUT" "${ARGS[@]}" ${MUTANTS_ARGS:-} -o "$OUT" \
     -- -- --skip render::integrator::tests::very_dim_point_light_beside_a_bright_one_is_unbiased
