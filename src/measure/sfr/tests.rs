@@ -228,6 +228,21 @@ fn lsf_span_rise_ends_at_ninety_percent_inclusive() {
     assert_eq!(s.lsf_span(), (-11.0, 39.0));
 }
 
+/// And it starts where the smoothed ESF falls to 10 %, at it included: a
+/// step at bin 9 of 40 (plateaus 0 and 1) is smoothed to exactly 1/10 at
+/// bin 1, whose window is cut to 10 bins by the start; the ½ crossing is at
+/// bin 9 (9/17) and the rise ends at bin 16 (16/17 ≥ 90 %): rise 15 px,
+/// pad 34 px, span (1 − 34, 39), the first sample placed far out of the way.
+#[test]
+fn lsf_span_rise_starts_at_ten_percent_inclusive() {
+    let mut s = sfr_with(&[0.0], &[1.0], &[0.0], None);
+    s.esf_x_px = (0..40)
+        .map(|i| if i == 0 { -1000.0 } else { i as f64 })
+        .collect();
+    s.esf = (0..40).map(|i| if i < 9 { 0.0 } else { 1.0 }).collect();
+    assert_eq!(s.lsf_span(), (-33.0, 39.0));
+}
+
 /// Eight samples are enough to search for the rise: all eight smoothing
 /// windows cover the whole ESF, whose normalised mean here is 0 (a dip below
 /// the dark plateau), so no bin reaches ½; the rise starts at the middle
