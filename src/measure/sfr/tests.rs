@@ -288,6 +288,12 @@ fn fwhm_of_triangles() {
     let xk: Vec<f64> = (0..9).map(|i| i as f64).collect();
     let yk = [0.38, 0.39, 0.4, 0.6, 1.0, 0.6, 0.4, 0.39, 0.38];
     assert!(close(fwhm(&xk, &yk), 3.0, 1e-12), "{}", fwhm(&xk, &yk));
+    // Shoulders at exactly half height belong to the peak: the width runs to
+    // where the curve falls below half, 1 to 5, not from the inner shoulder
+    // samples.
+    let xs: Vec<f64> = (0..7).map(|i| i as f64).collect();
+    let ys = [0.0, 0.5, 0.5, 1.0, 0.5, 0.5, 0.0];
+    assert!(close(fwhm(&xs, &ys), 4.0, 1e-12), "{}", fwhm(&xs, &ys));
     // Never falling to half on the right: the right edge is the last sample.
     let ramp: Vec<f64> = x.iter().map(|&v| (v + 4.0).min(2.0)).collect();
     assert!(
