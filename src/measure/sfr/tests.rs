@@ -197,6 +197,12 @@ fn lsf_span_brackets_the_rise_with_its_padding() {
     assert_eq!(s.lsf_span(), (-13.5, 13.25));
     s.esf = s.esf.iter().map(|v| 2.0 - 3.0 * v).collect();
     assert_eq!(s.lsf_span(), (-13.5, 13.25));
+    // The LSF curve (px without a pitch) holds exactly the bins of the span:
+    // x[26] = −13.5 px … x[133] = 13.25 px, 108 of the 161.
+    s.lsf = vec![0.0; 161];
+    let lsf = s.curves().into_iter().find(|c| c.name == "lsf").unwrap();
+    assert_eq!(lsf.x.len(), 108);
+    assert_eq!((lsf.x[0], lsf.x[107]), (-13.5, 13.25));
     // The span stops at the data's ends.
     s.esf_x_px = (0..161).map(|i| (i as f64 - 80.0) * 0.05).collect();
     s.esf = (0..161).map(|i| if i < 80 { 0.0 } else { 1.0 }).collect();

@@ -188,3 +188,324 @@ fn relative_illumination_needs_a_map_and_the_source() {
     let got = relative_illumination_at(&c, (4, 4), 1, 2);
     assert!((got - (1.0 - 0.5 * h_mm / 0.01)).abs() < 1e-12, "{got}");
 }
+
+/// w[c][b] = k·QE_c(λ)·Δλ·A·FF·λ/(hc), written out with CODATA's h and c:
+/// three channels of different constant QE, a fill factor and a calibration
+/// factor other than 1, so each factor and each operation shows.
+#[test]
+fn channel_weights_are_electrons_per_second_per_irradiance() {
+    let text = "cfa \"rggb\"\nqe r=\"constant:0.5\" g=\"constant:0.25\" b=\"constant:0.125\"\n\
+                conversion-gain-uv-per-e 100\nvoltage-swing-v 1.0\nwell-capacity-e 1000\n\
+                bit-depth 12\nblack-level-dv 0\npixel-size-um 2\nfill-factor 0.5\n\
+                illuminance-scale-factor 3\n";
+    let c = SensorConfig::parse(text, Path::new("rgb.kdl")).unwrap();
+    let grid = WavelengthGrid::new(400.0, 700.0, 10.0).unwrap();
+    let w = channel_weights(&c, &grid);
+    assert_eq!(w.len(), 3);
+    let (h, cl) = (6.626_070_15e-34, 299_792_458.0);
+    for (ch, row) in w.iter().enumerate() {
+        assert_eq!(row.len(), 31);
+        let qe = match c.cfa.channels[ch].as_str() {
+            "r" => 0.5,
+            "g" => 0.25,
+            "b" => 0.125,
+            other => panic!("channel {other}"),
+        };
+        for (b, &got) in row.iter().enumerate() {
+            let lambda_m = (400.0 + 10.0 * b as f64) * 1e-9;
+            let want = 3.0 * qe * 10.0 * (2e-6 * 2e-6 * 0.5) * lambda_m / (h * cl);
+            assert!(
+                (got / want - 1.0).abs() < 1e-12,
+                "{ch} {b}: {got} vs {want}"
+            );
+        }
+    }
+}
+
+/// Sensor pixels of 0.7 optical pixels: the overlaps' sums miss 1 by round-off
+/// (1 ± 2·10⁻¹⁶, worked out in IEEE doubles), and the renormalisation makes
+/// every pixel's weights sum to exactly 1, so a flat field stays exactly flat.
+#[test]
+fn axis_map_weights_sum_to_exactly_one() {
+    for (ns, of) in [(5, 7), (3, 4), (7, 13)] {
+        let m = axis_map(ns, of, 0, of, 0.7);
+        assert_eq!(m.weights.len(), ns as usize);
+        for (j, v) in m.weights.iter().enumerate() {
+            let sum: f64 = v.iter().map(|x| x.1).sum();
+            assert_eq!(sum, 1.0, "{ns} on {of}, pixel {j}: {v:?}");
+        }
+    }
+}
+
+/// An RGB sensor of 2 µm pixels, exposure 0.5 s, analog gain 2, black level
+/// 10 DV, no noise, no clipping, no quantisation (so every step is linear).
+fn rgb_linear() -> SensorConfig {
+    let text = "cfa \"rggb\"\nqe r=\"constant:0.5\" g=\"constant:0.25\" b=\"constant:0.125\"\n\
+                conversion-gain-uv-per-e 100\nvoltage-swing-v 1.0\nwell-capacity-e 1000\n\
+                bit-depth 12\nblack-level-dv 10\npixel-size-um 2\nexposure-s 0.5\n\
+                analog-gain 2\n";
+    let mut c = SensorConfig::parse(text, Path::new("rgb.kdl")).unwrap();
+    c.sources = Sources::none();
+    c
+}
+
+/// Nine bands (one 8-lane block and a remainder in the same-grid dot product).
+fn nine_bands() -> WavelengthGrid {
+    WavelengthGrid::new(400.0, 480.0, 10.0).unwrap()
+}
+
+/// Mean electrons over 0.5 s of a pixel of channel `ch` ("r", "g", "b") under
+/// the spectral irradiance `e` (W/(m²·nm), on [`nine_bands`]), by hand.
+fn hand_electrons(ch: &str, e: &[f64]) -> f64 {
+    let qe = match ch {
+        "r" => 0.5,
+        "g" => 0.25,
+        _ => 0.125,
+    };
+    let (h, c) = (6.626_070_15e-34, 299_792_458.0);
+    let rate: f64 = e
+        .iter()
+        .enumerate()
+        .map(|(b, eb)| qe * 10.0 * 4e-12 * (400.0 + 10.0 * b as f64) * 1e-9 / (h * c) * eb)
+        .sum();
+    0.5 * rate
+}
+
+/// Irradiance of optical pixel (x, y) in band b: distinct everywhere.
+fn irradiance_at(x: u32, y: u32, b: usize) -> f64 {
+    1e-3 * (1.0 + x as f64 + 7.0 * y as f64) * (1.0 + 0.1 * b as f64)
+}
+
+fn optical_image(full: (u32, u32), window: Rect, pitch_m: f64) -> OpticalImage {
+    let mut oi = OpticalImage::new(full.0, full.1, window, pitch_m, nine_bands());
+    let mut k = 0;
+    for y in window.y..window.y + window.h {
+        for x in window.x..window.x + window.w {
+            for b in 0..9 {
+                oi.irradiance[k] = irradiance_at(x, y, b) as f32;
+                k += 1;
+            }
+        }
+    }
+    oi.labels = (0..window.area() as u32).map(|i| 100 + i).collect();
+    oi
+}
+
+/// The linear chain of a pixel: electrons → volts (100 µV/e⁻) → DV (gain 2,
+/// 2¹² steps per volt, black 10).
+fn assert_linear_chain(f: &SensorFrame, i: usize, want_e: f64, what: &str) {
+    let close = |a: f64, b: f64| (a / b - 1.0).abs() < 2e-6;
+    let e = f.mean_electrons[i] as f64;
+    assert!(close(e, want_e), "{what}: mean electrons {e} vs {want_e}");
+    assert_eq!(f.image.electrons[i], f.mean_electrons[i], "{what}");
+    assert!(close(f.volts[i] as f64, want_e * 1e-4), "{what}: volts");
+    let dv = want_e * 1e-4 * 2.0 * 4096.0 + 10.0;
+    assert!(
+        close(f.image.dv[i] as f64, dv),
+        "{what}: DV {} vs {dv}",
+        f.image.dv[i]
+    );
+}
+
+/// Same grids (2 µm optical pixels on 2 µm sensor pixels), a window of the
+/// frame: each sensor pixel reads exactly its optical pixel, every CFA channel
+/// with its own QE, labels carried over.
+#[test]
+fn run_on_the_same_grid_reads_each_optical_pixel() {
+    let c = rgb_linear();
+    let window = Rect::new(1, 2, 3, 2);
+    let oi = optical_image((6, 5), window, 2e-6);
+    let f = simulate_frame(&c, &oi, 1).unwrap();
+    assert_eq!((f.image.full_width, f.image.full_height), (6, 5));
+    assert_eq!(f.image.window, window);
+    assert_eq!(f.image.exposure_s, 0.5);
+    for (i, (x, y)) in (2..4).flat_map(|y| (1..4).map(move |x| (x, y))).enumerate() {
+        let ch = &c.cfa.channels[c.cfa.channel_at(x, y)];
+        let e: Vec<f64> = (0..9).map(|b| irradiance_at(x, y, b)).collect();
+        assert_linear_chain(&f, i, hand_electrons(ch, &e), &format!("({x}, {y})"));
+    }
+    assert_eq!(f.image.labels, oi.labels);
+    // `simulate` keeps DV and electrons only.
+    let s = simulate(&c, &oi, 1).unwrap();
+    assert_eq!(
+        (s.dv, s.electrons),
+        (f.image.dv.clone(), f.image.electrons.clone())
+    );
+}
+
+/// 1 µm optical pixels under 2 µm sensor pixels: each sensor pixel averages
+/// the 2×2 optical pixels it covers; its label is the one under its centre.
+#[test]
+fn run_on_a_finer_optical_grid_averages_the_covered_pixels() {
+    let c = rgb_linear();
+    let oi = optical_image((4, 4), Rect::new(0, 0, 4, 4), 1e-6);
+    let f = simulate_frame(&c, &oi, 1).unwrap();
+    assert_eq!((f.image.full_width, f.image.full_height), (2, 2));
+    for (i, (x, y)) in [(0, 0), (1, 0), (0, 1), (1, 1)].into_iter().enumerate() {
+        let ch = &c.cfa.channels[c.cfa.channel_at(x, y)];
+        let e: Vec<f64> = (0..9)
+            .map(|b| {
+                let mut s = 0.0;
+                for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                    s += irradiance_at(2 * x + dx, 2 * y + dy, b) as f32 as f64;
+                }
+                s / 4.0
+            })
+            .collect();
+        assert_linear_chain(&f, i, hand_electrons(ch, &e), &format!("({x}, {y})"));
+        let centre = (2 * y + 1) * 4 + 2 * x + 1;
+        assert_eq!(f.image.labels[i], 100 + centre, "({x}, {y})");
+    }
+}
+
+/// 4 µm optical pixels under 2 µm sensor pixels: every sensor pixel lies in
+/// one optical pixel (weight 1, but two sensor pixels per optical pixel, so not
+/// the same grid).
+#[test]
+fn run_on_a_coarser_optical_grid_repeats_each_pixel() {
+    let c = rgb_linear();
+    let oi = optical_image((2, 2), Rect::new(0, 0, 2, 2), 4e-6);
+    let f = simulate_frame(&c, &oi, 1).unwrap();
+    assert_eq!((f.image.full_width, f.image.full_height), (4, 4));
+    for y in 0..4u32 {
+        for x in 0..4u32 {
+            let ch = &c.cfa.channels[c.cfa.channel_at(x, y)];
+            let e: Vec<f64> = (0..9).map(|b| irradiance_at(x / 2, y / 2, b)).collect();
+            let i = (y * 4 + x) as usize;
+            assert_linear_chain(&f, i, hand_electrons(ch, &e), &format!("({x}, {y})"));
+            assert_eq!(f.image.labels[i], 100 + (y / 2) * 2 + x / 2);
+        }
+    }
+}
+
+/// Relative illumination scales the signal on the same-grid path and the
+/// resampling path alike.
+#[test]
+fn run_applies_relative_illumination_on_both_paths() {
+    let mut c = rgb_linear();
+    c.relative_illumination = RelativeIllumination::Table {
+        field_height_mm: vec![0.0, 0.01],
+        value: vec![1.0, 0.5],
+    };
+    c.sources.pixel_vignetting = true;
+    for (oi, full) in [
+        (optical_image((4, 4), Rect::new(0, 0, 4, 4), 2e-6), 4u32),
+        (optical_image((2, 2), Rect::new(0, 0, 2, 2), 4e-6), 4),
+    ] {
+        let f = simulate_frame(&c, &oi, 1).unwrap();
+        let oi_px = |x: u32, y: u32| {
+            if oi.full_width == 4 {
+                (x, y)
+            } else {
+                (x / 2, y / 2)
+            }
+        };
+        for (x, y) in [(0u32, 0u32), (1, 2), (3, 1)] {
+            let ch = &c.cfa.channels[c.cfa.channel_at(x, y)];
+            let (ox, oy) = oi_px(x, y);
+            let e: Vec<f64> = (0..9).map(|b| irradiance_at(ox, oy, b)).collect();
+            let dx = (x as f64 + 0.5 - full as f64 / 2.0) * 2e-3;
+            let dy = (y as f64 + 0.5 - full as f64 / 2.0) * 2e-3;
+            let ri = 1.0 - 0.5 * (dx * dx + dy * dy).sqrt() / 0.01;
+            let i = (y * full + x) as usize;
+            assert_linear_chain(&f, i, hand_electrons(ch, &e) * ri, &format!("({x}, {y})"));
+        }
+    }
+}
+
+/// Every refusal of `run`, each alone.
+#[test]
+fn run_refuses_bad_optical_images() {
+    let c = rgb_linear();
+    let good = optical_image((4, 4), Rect::new(0, 0, 4, 4), 2e-6);
+    assert!(simulate(&c, &good, 1).is_ok());
+    for pitch in [0.0, -2e-6, f64::NAN, f64::INFINITY] {
+        let mut oi = good.clone();
+        oi.pixel_pitch_m = pitch;
+        let e = simulate(&c, &oi, 1).unwrap_err().to_string();
+        assert!(e.contains("pixel pitch"), "{pitch}: {e}");
+    }
+    let mut oi = good.clone();
+    oi.irradiance.pop();
+    let e = simulate(&c, &oi, 1).unwrap_err().to_string();
+    assert!(e.contains("wrong length"), "{e}");
+    // A 1 µm-wide window under 2 µm pixels covers no whole sensor pixel.
+    let oi = optical_image((4, 4), Rect::new(1, 0, 1, 4), 1e-6);
+    let e = simulate(&c, &oi, 1).unwrap_err().to_string();
+    assert!(e.contains("covers no whole pixel"), "{e}");
+    let oi = optical_image((4, 4), Rect::new(0, 1, 4, 1), 1e-6);
+    assert!(simulate(&c, &oi, 1).is_err());
+    // Negative or non-finite irradiance, on both paths.
+    for pitch in [2e-6, 1e-6] {
+        for bad in [-1e-3, f32::NAN, f32::INFINITY] {
+            let mut oi = optical_image((4, 4), Rect::new(0, 0, 4, 4), pitch);
+            oi.irradiance[5 * 9 + 8] = bad;
+            let e = simulate(&c, &oi, 1).unwrap_err().to_string();
+            assert!(e.contains("negative or non-finite"), "{pitch} {bad}: {e}");
+        }
+    }
+    // An invalid sensor: three channels, one QE curve.
+    let mut bad = c.clone();
+    bad.qe.truncate(1);
+    let e = simulate(&bad, &good, 1).unwrap_err().to_string();
+    assert!(e.contains("QE"), "{e}");
+}
+
+/// A flat field: every pixel of the window sees the same irradiance; the
+/// window must lie inside the sensor (each edge alone), the sensor needs rows
+/// and cols, and the irradiance must be finite and ≥ 0.
+#[test]
+fn simulate_flat_exposes_a_uniform_field_inside_the_sensor() {
+    let mut c = rgb_linear();
+    c.cols = Some(6);
+    c.rows = Some(4);
+    let grid = nine_bands();
+    let spectrum = Spectrum::constant("flat", 2e-3);
+    let window = Rect::new(1, 1, 5, 3);
+    let f = simulate_flat(&c, &spectrum, &grid, window, 1).unwrap();
+    assert_eq!(f.image.window, window);
+    for y in 1..4u32 {
+        for x in 1..6u32 {
+            let ch = &c.cfa.channels[c.cfa.channel_at(x, y)];
+            let i = ((y - 1) * 5 + (x - 1)) as usize;
+            assert_linear_chain(
+                &f,
+                i,
+                hand_electrons(ch, &[2e-3; 9]),
+                &format!("({x}, {y})"),
+            );
+        }
+    }
+    // The whole sensor is a window; one more column or row is not.
+    assert!(simulate_flat(&c, &spectrum, &grid, Rect::new(0, 0, 6, 4), 1).is_ok());
+    for w in [
+        Rect::new(0, 0, 0, 4),
+        Rect::new(0, 0, 6, 0),
+        Rect::new(1, 0, 6, 4),
+        Rect::new(0, 1, 6, 4),
+    ] {
+        let e = simulate_flat(&c, &spectrum, &grid, w, 1)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("not inside"), "{w:?}: {e}");
+    }
+    for bad in [-1e-3, f64::NAN, f64::INFINITY] {
+        let e = simulate_flat(&c, &Spectrum::constant("bad", bad), &grid, window, 1);
+        assert!(e.is_err(), "{bad}");
+    }
+    let mut no_size = c.clone();
+    no_size.rows = None;
+    let e = simulate_flat(&no_size, &spectrum, &grid, window, 1)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("rows and cols"), "{e}");
+    let mut no_size = c.clone();
+    no_size.cols = None;
+    assert!(simulate_flat(&no_size, &spectrum, &grid, window, 1).is_err());
+    // The flat rate per channel is the same sum.
+    let rates = flat_rate_e_per_s(&c, &spectrum, &grid);
+    for (ch, r) in c.cfa.channels.iter().zip(&rates) {
+        let want = 2.0 * hand_electrons(ch, &[2e-3; 9]);
+        assert!((r / want - 1.0).abs() < 1e-12, "{ch}: {r} vs {want}");
+    }
+}
