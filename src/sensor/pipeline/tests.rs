@@ -146,10 +146,22 @@ fn dot_check_sums_and_validates() {
         q[i] = bad;
         assert!(!dot_check(&w, &q).1, "{i} {bad}");
     }
-    // −0 is not negative.
+    // −0 and 0 are not negative, in the 8-lane blocks and in the remainder.
     let mut q = p.clone();
     q[2] = -0.0;
+    q[17] = 0.0;
+    q[18] = -0.0;
     assert!(dot_check(&w, &q).1);
+    // A sum that overflows f32 is not finite: two values in one lane, or in
+    // the remainder after blocks of zeros.
+    let mut q = vec![0.0f32; 19];
+    q[0] = 3e38;
+    q[8] = 3e38;
+    assert!(!dot_check(&w, &q).1);
+    let mut q = vec![0.0f32; 19];
+    q[16] = 3e38;
+    q[17] = 3e38;
+    assert!(!dot_check(&w, &q).1);
 }
 
 #[test]
@@ -504,8 +516,95 @@ fn simulate_flat_exposes_a_uniform_field_inside_the_sensor() {
     assert!(simulate_flat(&no_size, &spectrum, &grid, window, 1).is_err());
     // The flat rate per channel is the same sum.
     let rates = flat_rate_e_per_s(&c, &spectrum, &grid);
+    assert_eq!(rates.len(), 3);
     for (ch, r) in c.cfa.channels.iter().zip(&rates) {
         let want = 2.0 * hand_electrons(ch, &[2e-3; 9]);
         assert!((r / want - 1.0).abs() < 1e-12, "{ch}: {r} vs {want}");
+    }
+}
+
+/// A sensor smaller than the optical image on the same grid (4×4 pixels
+/// centred on 6×4 optical pixels): the same-grid path starts one optical pixel
+/// in, and the labels are those under each sensor pixel, not the optical
+/// image's own.
+#[test]
+fn run_of_a_smaller_sensor_on_the_same_grid_starts_inside_the_image() {
+    let mut c = rgb_linear();
+    c.cols = Some(4);
+    c.rows = Some(4);
+    let oi = optical_image((6, 4), Rect::new(0, 0, 6, 4), 2e-6);
+    let f = simulate_frame(&c, &oi, 1).unwrap();
+    assert_eq!(f.image.window, Rect::new(0, 0, 4, 4));
+    assert_eq!(f.image.labels.len(), 16);
+    for y in 0..4u32 {
+        for x in 0..4u32 {
+            let i = (y * 4 + x) as usize;
+            let ch = &c.cfa.channels[c.cfa.channel_at(x, y)];
+            let e: Vec<f64> = (0..9).map(|b| irradiance_at(x + 1, y, b)).collect();
+            assert_linear_chain(&f, i, hand_electrons(ch, &e), &format!("({x}, {y})"));
+            assert_eq!(f.image.labels[i], 100 + y * 6 + x + 1, "({x}, {y})");
+        }
+    }
+}
+
+/// Auto exposure through the whole chain: the brightest pixel (100th
+/// percentile) collects `level` of the full well, on both paths; invalid
+/// irradiance in one row is refused; a fixed exposure time that is not finite
+/// and ≥ 0 is refused.
+#[test]
+fn run_with_auto_exposure_fills_the_well_to_the_level() {
+    let mut c = rgb_linear();
+    c.exposure = Exposure::Auto {
+        level: 0.8,
+        percentile: 100.0,
+    };
+    // Full well min(1000 e⁻, 1 V / 100 µV/e⁻) = 1000 e⁻.
+    for pitch in [2e-6, 1e-6] {
+        let oi = optical_image((4, 4), Rect::new(0, 0, 4, 4), pitch);
+        let f = simulate_frame(&c, &oi, 1).unwrap();
+        let max = f.mean_electrons.iter().fold(0f32, |a, &b| a.max(b));
+        assert!((max as f64 / 800.0 - 1.0).abs() < 1e-6, "{pitch}: {max}");
+        assert!(f.image.exposure_s > 0.0 && f.image.exposure_s.is_finite());
+        // One bad band of one pixel in the last row.
+        let mut bad = oi.clone();
+        let last = bad.irradiance.len() - 1;
+        bad.irradiance[last] = f32::NAN;
+        let e = simulate(&c, &bad, 1).unwrap_err().to_string();
+        assert!(e.contains("negative or non-finite"), "{pitch}: {e}");
+    }
+    let oi = optical_image((4, 4), Rect::new(0, 0, 4, 4), 2e-6);
+    for t in [f64::NAN, f64::INFINITY, -1.0] {
+        c.exposure = Exposure::Seconds(t);
+        assert!(simulate(&c, &oi, 1).is_err(), "{t}");
+    }
+    c.exposure = Exposure::Seconds(0.0);
+    let f = simulate_frame(&c, &oi, 1).unwrap();
+    assert!(f.mean_electrons.iter().all(|&e| e == 0.0));
+}
+
+/// A dark flat field (zero irradiance) is valid; relative illumination
+/// scales a flat field too.
+#[test]
+fn simulate_flat_of_zero_light_and_with_relative_illumination() {
+    let mut c = rgb_linear();
+    c.cols = Some(4);
+    c.rows = Some(4);
+    let grid = nine_bands();
+    let window = Rect::new(0, 0, 4, 4);
+    let f = simulate_flat(&c, &Spectrum::constant("dark", 0.0), &grid, window, 1).unwrap();
+    assert!(f.mean_electrons.iter().all(|&e| e == 0.0));
+    c.relative_illumination = RelativeIllumination::Table {
+        field_height_mm: vec![0.0, 0.01],
+        value: vec![1.0, 0.5],
+    };
+    c.sources.pixel_vignetting = true;
+    let f = simulate_flat(&c, &Spectrum::constant("flat", 2e-3), &grid, window, 1).unwrap();
+    for (x, y) in [(0u32, 0u32), (1, 2), (3, 1)] {
+        let ch = &c.cfa.channels[c.cfa.channel_at(x, y)];
+        let dx = (x as f64 - 1.5) * 2e-3;
+        let dy = (y as f64 - 1.5) * 2e-3;
+        let ri = 1.0 - 0.5 * (dx * dx + dy * dy).sqrt() / 0.01;
+        let want = hand_electrons(ch, &[2e-3; 9]) * ri;
+        assert_linear_chain(&f, (y * 4 + x) as usize, want, &format!("({x}, {y})"));
     }
 }
