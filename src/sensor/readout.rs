@@ -116,7 +116,7 @@ impl Isa {
                 }
             };
             let cap = std::env::var("CAMSIM_SENSOR_ISA").unwrap_or_default();
-            if !["", "baseline", "avx2", "avx512"].contains(&cap.as_str()) {
+            if !Self::cap_is_known(&cap) {
                 static WARNED: std::sync::Once = std::sync::Once::new();
                 WARNED.call_once(|| {
                     eprintln!(
@@ -124,12 +124,25 @@ impl Isa {
                     )
                 });
             }
-            if cap != "baseline" && cap != "avx2" && has("avx512") {
-                return Isa::Avx512;
-            }
-            if cap != "baseline" && has("avx2") {
-                return Isa::Avx2;
-            }
+            Self::level(&cap, has("avx512"), has("avx2"))
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        Isa::Baseline
+    }
+
+    /// Whether `cap` is a value `CAMSIM_SENSOR_ISA` accepts ("" is no cap).
+    fn cap_is_known(cap: &str) -> bool {
+        ["", "baseline", "avx2", "avx512"].contains(&cap)
+    }
+
+    /// The widest level at most `cap` (an unknown cap is none) on a CPU that
+    /// has the AVX-512 and AVX2 feature sets or not.
+    fn level(cap: &str, avx512: bool, avx2: bool) -> Self {
+        if cap != "baseline" && cap != "avx2" && avx512 {
+            return Isa::Avx512;
+        }
+        if cap != "baseline" && avx2 {
+            return Isa::Avx2;
         }
         Isa::Baseline
     }
@@ -584,5 +597,82 @@ mod tests {
         cfg.sources.dark_current = false;
         let ro = Readout::new(&cfg, (4, 1), w, 0.5, 1);
         assert_eq!(ro.mean_electrons(100.0), 50.0);
+    }
+
+    /// Column FPN is (1 + σ_g·n₁, σ_o·n₂) with n₁, n₂ the first two normals of
+    /// the column's own stream (seed, FPN_COLUMN, column). Over 20 000 columns
+    /// the gains have mean 1 and standard deviation σ_g, the offsets mean 0 and
+    /// standard deviation σ_o: within 4 standard errors (σ/√n for a mean,
+    /// σ/√(2n) for a standard deviation of normal draws).
+    #[test]
+    fn column_fpn_is_gain_and_offset_from_the_columns_stream() {
+        let mut cfg = SensorConfig::parse(
+            include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/sensors/imx363.kdl")),
+            std::path::Path::new("sensors/imx363.kdl"),
+        )
+        .unwrap();
+        cfg.column_fpn_gain = 0.01;
+        cfg.column_fpn_offset_v = 2e-4;
+        cfg.fpn_seed = 7;
+        for x in [0u32, 1, 4031] {
+            let mut r = PixelRng::new(7, stream::FPN_COLUMN, x as u64);
+            let (n1, n2) = (r.normal(), r.normal());
+            assert_eq!(
+                fpn_column(&cfg, x),
+                (1.0 + 0.01 * n1, 2e-4 * n2),
+                "column {x}"
+            );
+        }
+        let n = 20_000;
+        let (g, o): (Vec<f64>, Vec<f64>) = (0..n).map(|x| fpn_column(&cfg, x)).unzip();
+        let stats = |v: &[f64]| {
+            let m = v.iter().sum::<f64>() / v.len() as f64;
+            let sd = (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt();
+            (m, sd)
+        };
+        let nf = n as f64;
+        let (mg, sg) = stats(&g);
+        assert!((mg - 1.0).abs() < 4.0 * 0.01 / nf.sqrt(), "gain mean {mg}");
+        assert!(
+            (sg - 0.01).abs() < 4.0 * 0.01 / (2.0 * nf).sqrt(),
+            "gain sd {sg}"
+        );
+        let (mo, so) = stats(&o);
+        assert!(mo.abs() < 4.0 * 2e-4 / nf.sqrt(), "offset mean {mo}");
+        assert!(
+            (so - 2e-4).abs() < 4.0 * 2e-4 / (2.0 * nf).sqrt(),
+            "offset sd {so}"
+        );
+    }
+
+    /// The level a cap allows on CPUs with and without AVX-512 and AVX2, and
+    /// the caps `CAMSIM_SENSOR_ISA` knows; each level's name.
+    #[test]
+    fn isa_level_follows_the_cpu_and_the_cap() {
+        use Isa::*;
+        for (cap, want) in [
+            ("", [Avx512, Avx2, Baseline]),
+            ("avx512", [Avx512, Avx2, Baseline]),
+            ("bogus", [Avx512, Avx2, Baseline]),
+            ("avx2", [Avx2, Avx2, Baseline]),
+            ("baseline", [Baseline, Baseline, Baseline]),
+        ] {
+            let got = [
+                Isa::level(cap, true, true),
+                Isa::level(cap, false, true),
+                Isa::level(cap, false, false),
+            ];
+            assert_eq!(got, want, "cap {cap:?}");
+        }
+        for cap in ["", "baseline", "avx2", "avx512"] {
+            assert!(Isa::cap_is_known(cap), "{cap}");
+        }
+        for cap in ["bogus", "AVX2", "sse"] {
+            assert!(!Isa::cap_is_known(cap), "{cap}");
+        }
+        assert_eq!(
+            [Baseline, Avx2, Avx512].map(Isa::name),
+            ["baseline", "avx2+fma", "avx512f"]
+        );
     }
 }
