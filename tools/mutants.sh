@@ -102,6 +102,12 @@ if [ -n "$SHARD" ]; then
 fi
 OUT="$OUT_ROOT/$NAME"
 mkdir -p "$OUT"
+# Keep every run's outcomes (cargo-mutants keeps only the last two):
+# tools/mutants_score.py combines $OUT/runs/0, 1, … and the current one.
+if [ -f "$OUT/mutants.out/outcomes.json" ]; then
+    mkdir -p "$OUT/runs"
+    cp -r "$OUT/mutants.out" "$OUT/runs/$(find "$OUT/runs" -mindepth 1 -maxdepth 1 | wc -l)"
+fi
 for f in "${FILES[@]}"; do ARGS+=(-f "$f"); done
 cd "$TREE"
 # The test targets go to every cargo invocation (-C), not only to the test

@@ -425,6 +425,8 @@ fn bin_variances_are_unbiased_sample_variances() {
         &[0, 1, 3, 2],
     );
     assert_eq!(v, vec![0.0, 0.0, 1.0, 0.0]);
+    // Two samples {1, 3}: variance 2.
+    assert_eq!(bin_variances(&[4.0], &[10.0], &[2]), vec![2.0]);
     // Rounding below zero is clamped.
     let v = bin_variances(&[0.3], &[0.045 - 1e-17], &[2]);
     assert_eq!(v, vec![0.0]);
