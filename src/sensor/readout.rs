@@ -675,4 +675,78 @@ mod tests {
             ["baseline", "avx2+fma", "avx512f"]
         );
     }
+
+    /// The vectorised first passes take the common case, as the module docs
+    /// say: a photon count is finished in the first pass exactly when PTRS's
+    /// first proposal is accepted (μ ≥ 10 and finite; rng's own
+    /// `poisson_ptrs_first`), and read noise exactly when its first normal's
+    /// fast case holds (and, with reset noise on, the second's too). A pass
+    /// that sent every pixel to the exact second pass would give the same
+    /// values, only slower, so this is what tells the two apart.
+    #[test]
+    fn first_passes_finish_the_common_case() {
+        let mut cfg = SensorConfig::parse(
+            include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/sensors/imx363.kdl")),
+            std::path::Path::new("sensors/imx363.kdl"),
+        )
+        .unwrap();
+        let n = 4000;
+        let means: Vec<f32> = (0..n)
+            .map(|i| match i % 4 {
+                0 => 5.0,
+                1 => 10.0,
+                2 => 100.0 + i as f32,
+                _ => 1000.0 + i as f32,
+            })
+            .collect();
+        let window = Rect::new(0, 3, n as u32, 1);
+        let run = |cfg: &SensorConfig| {
+            let ro = Readout::new(cfg, (n as u32, 8), window, 0.01, 5);
+            let (mut dv, mut e) = (vec![0f32; n], vec![0f32; n]);
+            let out = RowOut {
+                dv: &mut dv,
+                electrons: &mut e,
+                volts: None,
+            };
+            let mut s = Scratch::default();
+            ro.row(0, &means, out, &mut s);
+            (ro, s.ok)
+        };
+        let gi0 = 3 * n as u64;
+        cfg.sources = Sources::none();
+        cfg.sources.photon_noise = true;
+        let (ro, ok) = run(&cfg);
+        let mut accepted = 0;
+        for c in 0..n {
+            let mu = means[c] as f64;
+            let want = mu >= 10.0
+                && PixelRng::keyed(ro.k_photon, gi0 + c as u64)
+                    .poisson_ptrs_first(mu)
+                    .accepted;
+            assert_eq!(ok[c], want, "pixel {c}, mean {mu}");
+            accepted += usize::from(want);
+        }
+        // The module docs' rejection rates (65 % at μ = 10, 33 % at 100, 24 % at
+        // 1000, fewer above) leave ≥ 1780 of the 3000 pixels with μ ≥ 10 in the
+        // first pass; less 4 binomial standard deviations (4·√(3000·¼) ≈ 110).
+        assert!(accepted >= 1670, "{accepted}");
+        for reset in [false, true] {
+            cfg.sources = Sources::none();
+            cfg.sources.read_noise = true;
+            cfg.sources.reset_noise = reset;
+            cfg.reset_noise_v = 3e-4;
+            let (ro, ok) = run(&cfg);
+            let zx = ziggurat_x();
+            for c in 0..n {
+                let gi = gi0 + c as u64;
+                let first = PixelRng::normal_fast(PixelRng::keyed_output(ro.k_read, gi, 1), zx).1;
+                let second = PixelRng::normal_fast(PixelRng::keyed_output(ro.k_read, gi, 2), zx).1;
+                assert_eq!(
+                    ok[c],
+                    first && (second || !reset),
+                    "pixel {c}, reset {reset}"
+                );
+            }
+        }
+    }
 }

@@ -425,6 +425,15 @@ mod tests {
             "relative-illumination \"table\" {\n point field-height-mm=1 value=1\n point field-height-mm=0 value=1\n}\n",
             "must increase",
         );
+        // Non-finite numbers (KDL's #inf, #nan) are not numbers here.
+        refuse(
+            "relative-illumination \"cos-n\" n=#inf distance-mm=4\n",
+            "expects a number",
+        );
+        refuse(
+            "relative-illumination \"table\" {\n point field-height-mm=0 value=#nan\n}\n",
+            "expects a number",
+        );
         // n = 0 is allowed: no fall-off.
         let c = parse("relative-illumination \"cos-n\" n=0 distance-mm=4\n").unwrap();
         assert_eq!(c.relative_illumination.at(3.0), 1.0);
