@@ -94,6 +94,12 @@ if [ -n "${MUTANTS_LIB_ONLY:-}" ]; then
     esac
 fi
 
+# The unit tests alone take about a second: a mutant that loops forever
+# (a rejection sampler that never accepts) is given 30 s, not 300.
+if [ -n "${MUTANTS_LIB_ONLY:-}" ] && [ -z "${MUTANTS_TIMEOUT:-}" ]; then
+    TIMEOUT=30
+fi
+
 NAME="$MODULE"
 ARGS=()
 if [ -n "$SHARD" ]; then
