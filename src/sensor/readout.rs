@@ -737,15 +737,11 @@ mod tests {
             cfg.reset_noise_v = 3e-4;
             let (ro, ok) = run(&cfg);
             let zx = ziggurat_x();
-            for c in 0..n {
+            for (c, &ok) in ok.iter().enumerate() {
                 let gi = gi0 + c as u64;
                 let first = PixelRng::normal_fast(PixelRng::keyed_output(ro.k_read, gi, 1), zx).1;
                 let second = PixelRng::normal_fast(PixelRng::keyed_output(ro.k_read, gi, 2), zx).1;
-                assert_eq!(
-                    ok[c],
-                    first && (second || !reset),
-                    "pixel {c}, reset {reset}"
-                );
+                assert_eq!(ok, first && (second || !reset), "pixel {c}, reset {reset}");
             }
         }
     }
