@@ -334,20 +334,40 @@ fn polynomial_edge_fit_follows_a_curved_edge() {
     }
     let p = Plane::new(W, H, v).unwrap();
     let t50 = reference_mtf50(sigma);
-    let lin = sfr(&p, &SfrOptions::default())
-        .unwrap()
-        .mtf50_cy_per_px
-        .unwrap();
-    let quad = sfr(
+    let lin_sfr = sfr(&p, &SfrOptions::default()).unwrap();
+    let lin = lin_sfr.mtf50_cy_per_px.unwrap();
+    let quad_sfr = sfr(
         &p,
         &SfrOptions {
             fit_degree: 2,
             ..Default::default()
         },
     )
-    .unwrap()
-    .mtf50_cy_per_px
     .unwrap();
+    let quad = quad_sfr.mtf50_cy_per_px.unwrap();
+    // The reported angle is the edge's tangent at the middle of the rows used
+    // (rows start … start + n − 1, start = (H − n)/2): atan x_e'(y_mid).
+    let n = quad_sfr.rows_used;
+    let y_mid = ((H - n) / 2) as f64 + (n - 1) as f64 / 2.0;
+    let want = (t + 2.0 * k * (y_mid - yc)).atan().to_degrees();
+    println!(
+        "curved edge: angle {:.5}° at row {y_mid}, tangent there {want:.5}°",
+        quad_sfr.edge_angle_deg
+    );
+    // The straight fit's slope over equally spaced rows of a parabola is its
+    // tangent at their mean row, the same middle row, if every row is used.
+    assert_eq!(lin_sfr.rows_used, n);
+    println!(
+        "curved edge: straight fit's angle {:.5}°",
+        lin_sfr.edge_angle_deg
+    );
+    // Noise-free, the fit gives the tangent to < 10⁻⁵° (measured); the tangent
+    // turns 2k = 0.05° per row, so 0.002° tells the middle row from half a row off.
+    assert!(
+        (quad_sfr.edge_angle_deg - want).abs() < 0.002,
+        "angle {} vs the tangent at the middle row {want}",
+        quad_sfr.edge_angle_deg
+    );
     println!("curved edge: MTF50 linear fit {lin:.4}, quadratic fit {quad:.4}, truth {t50:.4}");
     // The local edge angle varies by ±2.4° here, changing the pixel-aperture term
     // by < 0.1 %; the quadratic fit must recover the 1 % MTF50 accuracy…

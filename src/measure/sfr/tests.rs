@@ -973,3 +973,14 @@ fn lum_of_a_mosaic_with_unequal_channels_is_the_edge_mtf() {
         assert!((m - l).abs() < 0.01, "MTF({f}) mono {m}, lum {l}");
     }
 }
+
+/// Finite values whose ESF sums overflow (an edge at 10³⁰⁷): refused with an
+/// error, never measured as NaN.
+#[test]
+fn an_edge_whose_sums_overflow_is_refused_not_nan() {
+    let v: Vec<f64> = blurred_edge(0.7).iter().map(|x| x * 1e307).collect();
+    match sfr(&Plane::new(64, 64, v).unwrap(), &SfrOptions::default()) {
+        Err(e) => assert!(e.to_string().contains("edge"), "{e}"),
+        Ok(r) => panic!("measured: MTF {:?}", &r.mtf[..4]),
+    }
+}
