@@ -463,3 +463,47 @@ fn cli_simulate_then_calibrate() {
     assert_eq!(o.status.code(), Some(3));
     assert!(String::from_utf8_lossy(&o.stderr).contains("did you mean 'imx363'"));
 }
+
+/// `CAMSIM_SENSOR_ISA` lowers the readout's instruction set: a value it does
+/// not know is reported on stderr (and ignored), a known one is not, and the
+/// frames are the same bits either way.
+#[test]
+fn an_unknown_sensor_isa_cap_is_reported() {
+    let bin = env!("CARGO_BIN_EXE_camsim");
+    let dir = tempfile::tempdir().unwrap();
+    let run = |cap: &str, out: &str| {
+        let o = std::process::Command::new(bin)
+            .env("CAMSIM_SENSOR_ISA", cap)
+            .args([
+                "sensor",
+                "simulate",
+                "imx363",
+                "--flat-irradiance-w-m2-nm",
+                "0.0022",
+                "--exposure-s",
+                "0.002",
+                "--frames",
+                "1",
+                "--size",
+                "16x16",
+                "--out",
+                dir.path().join(out).to_str().unwrap(),
+            ])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stderr).into_owned()
+    };
+    let warned = run("bogus", "a");
+    assert!(
+        warned.contains("CAMSIM_SENSOR_ISA=\"bogus\" ignored"),
+        "{warned}"
+    );
+    for cap in ["avx2", "baseline"] {
+        let quiet = run(cap, cap);
+        assert!(!quiet.contains("CAMSIM_SENSOR_ISA"), "{cap}: {quiet}");
+    }
+    let frame = |d: &str| std::fs::read(dir.path().join(d).join("frame_0000.png")).unwrap();
+    assert_eq!(frame("a"), frame("baseline"));
+    assert_eq!(frame("a"), frame("avx2"));
+}
