@@ -665,7 +665,15 @@ fn horizontal_edges_are_transposed_and_options_checked() {
             .contains("too small")
     );
     let small = Plane::new(64, 7, vec![0.5; 7 * 64]).unwrap();
-    assert!(sfr(&small, &SfrOptions::default()).is_err());
+    let e = sfr(&small, &SfrOptions::default()).unwrap_err().to_string();
+    assert!(e.contains("too small"), "{e}");
+    // 8 px is enough in either direction (a flat 8×8 region fails later, for
+    // having no edge).
+    for (w, h) in [(8, 64), (64, 8)] {
+        let flat = Plane::new(w, h, vec![0.5; w * h]).unwrap();
+        let e = sfr(&flat, &SfrOptions::default()).unwrap_err().to_string();
+        assert!(!e.contains("too small"), "{w}×{h}: {e}");
+    }
     for degree in [0, 6] {
         let o = SfrOptions {
             fit_degree: degree,
@@ -983,4 +991,50 @@ fn an_edge_whose_sums_overflow_is_refused_not_nan() {
         Err(e) => assert!(e.to_string().contains("edge"), "{e}"),
         Ok(r) => panic!("measured: MTF {:?}", &r.mtf[..4]),
     }
+}
+
+/// The noise floor of one noisy ESF bin j₀ (variance 2 over 4 samples, all
+/// other bins noise-free), worked out from its definition: the 3-tap LSF
+/// takes 2·ESF_{j₀} into LSF_{j₀−1} (when 1 ≤ j₀ − 1) and −2·ESF_{j₀} into
+/// LSF_{j₀+1} (when j₀ + 1 ≤ n − 2; the end copies are left out), so the
+/// windowed DFT at ω = 2πm/n moves by 2·(w_{j₀−1}e^{−iω(j₀−1)} −
+/// w_{j₀+1}e^{−iω(j₀+1)}) per unit of ESF; its rms over the bin's variance,
+/// times the derivative correction |ω/sin ω| (≤ 10), over the DC term.
+#[test]
+fn noise_floor_of_one_noisy_bin_follows_its_definition() {
+    let win = [0.1, 0.3, 0.5, 0.7, 0.9, 1.0, 0.8, 0.6, 0.4, 0.2];
+    let n = win.len();
+    let dc = 2.0;
+    for j0 in [1, 2, 5, 8, 9] {
+        let mut var = vec![0.0; n];
+        var[j0] = 2.0;
+        let mut cnt = vec![1u32; n];
+        cnt[j0] = 4;
+        let got = noise_floor(&win, &cnt, &var, dc, 4);
+        assert_eq!(got.len(), 4);
+        assert_eq!(got[0], 0.0);
+        for (m, &g) in got.iter().enumerate().skip(1) {
+            let w = 2.0 * std::f64::consts::PI * m as f64 / n as f64;
+            let (mut re, mut im) = (0.0, 0.0);
+            if j0 >= 2 {
+                let a = w * (j0 - 1) as f64;
+                re += win[j0 - 1] * a.cos();
+                im -= win[j0 - 1] * a.sin();
+            }
+            if j0 < n - 2 {
+                let a = w * (j0 + 1) as f64;
+                re -= win[j0 + 1] * a.cos();
+                im += win[j0 + 1] * a.sin();
+            }
+            let want =
+                (4.0 * (re * re + im * im) * 2.0 / 4.0).sqrt() * (w / w.sin()).abs().min(10.0) / dc;
+            assert!((g - want).abs() < 1e-12, "j₀ {j0}, m {m}: {g} vs {want}");
+        }
+    }
+    // No DC, no floor.
+    assert!(
+        noise_floor(&win, &[1; 10], &[1.0; 10], 0.0, 4)
+            .iter()
+            .all(|&v| v == 0.0)
+    );
 }
