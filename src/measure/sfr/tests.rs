@@ -904,7 +904,17 @@ fn steep_blurred_edge_matches_the_analytic_mtf_and_sits_at_zero() {
             );
         }
     }
+    // ¼-px bins over the region's width across the edge: 64·cos 12°·4 = 250.4
+    // → 250 (even) bins centred on the edge; frequencies up to 1 cy/px in steps
+    // of 4/250 cy/px: 63 of them.
     let n = r.esf.len();
+    assert_eq!((n, r.lsf.len(), r.esf_x_px.len()), (250, 250, 250));
+    assert_eq!((r.esf_x_px[0], r.esf_x_px[249]), (-31.125, 31.125));
+    assert_eq!(r.mtf.len(), 63);
+    assert_eq!(
+        (r.freq_cy_per_px[1], r.freq_cy_per_px[62]),
+        (4.0 / 250.0, 62.0 * 4.0 / 250.0)
+    );
     let mean = |s: &[f64]| s.iter().sum::<f64>() / s.len() as f64;
     assert!(
         (mean(&r.esf[..20]) - 0.1).abs() < 0.01,
@@ -973,6 +983,14 @@ fn lum_of_a_mosaic_with_unequal_channels_is_the_edge_mtf() {
         "{:?}",
         &lum.esf[n - 20..]
     );
+    // The mosaic's edge is located on 2×2 block means, whose centres lie half
+    // a pixel in: it still crosses ½ at x = 0 (a row off would move it tan 12°
+    // = 0.21 px).
+    let k = lum.esf.iter().position(|&v| v >= 0.5).unwrap();
+    let x_half =
+        lum.esf_x_px[k - 1] + (0.5 - lum.esf[k - 1]) / (lum.esf[k] - lum.esf[k - 1]) * 0.25;
+    println!("mosaic ESF crosses ½ at {x_half} px");
+    assert!(x_half.abs() < 0.08, "ESF crosses ½ at {x_half} px");
     let (a, b) = (mono.mtf50_cy_per_px.unwrap(), lum.mtf50_cy_per_px.unwrap());
     assert!((a / b - 1.0).abs() < 0.01, "MTF50 mono {a}, lum {b}");
     for f in [0.1, 0.2, 0.3, 0.4] {
