@@ -911,6 +911,12 @@ fn steep_blurred_edge_matches_the_analytic_mtf_and_sits_at_zero() {
     assert_eq!((n, r.lsf.len(), r.esf_x_px.len()), (250, 250, 250));
     assert_eq!((r.esf_x_px[0], r.esf_x_px[249]), (-31.125, 31.125));
     assert_eq!(r.mtf.len(), 63);
+    // Up to 2 cy/px: every frequency of the 250 bins' DFT, 0 … 125.
+    let o = SfrOptions {
+        max_freq_cy_per_px: 2.0,
+        ..Default::default()
+    };
+    assert_eq!(sfr(&p, &o).unwrap().mtf.len(), 126);
     assert_eq!(
         (r.freq_cy_per_px[1], r.freq_cy_per_px[62]),
         (4.0 / 250.0, 62.0 * 4.0 / 250.0)
