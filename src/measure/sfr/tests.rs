@@ -948,6 +948,49 @@ fn steep_blurred_edge_matches_the_analytic_mtf_and_sits_at_zero() {
     assert!(centroid.abs() < 0.15, "LSF centroid {centroid} px");
 }
 
+/// A Bayer mosaic of channels seeing `e` with the given offsets and gains.
+fn mosaic_of(e: &[f64], offset: [f64; 3], gain: [f64; 3]) -> Plane {
+    let ch = |x: usize, y: usize| match (x % 2, y % 2) {
+        (0, 0) => 0u8,
+        (1, 1) => 2,
+        _ => 1,
+    };
+    let mut p = Plane::new(
+        64,
+        64,
+        (0..64 * 64)
+            .map(|i| {
+                let c = ch(i % 64, i / 64) as usize;
+                offset[c] + gain[c] * e[i]
+            })
+            .collect(),
+    )
+    .unwrap();
+    p.channel = (0..64 * 64).map(|i| ch(i % 64, i / 64)).collect();
+    p.channel_names = vec!["r".into(), "g".into(), "b".into()];
+    p
+}
+
+/// A channel that does not see the edge (blue flat at 5) has no plateaus to
+/// normalise by: `lum` leaves it out and measures the edge in red and green.
+#[test]
+fn lum_leaves_out_a_channel_without_the_edge() {
+    let e = blurred_edge(0.7);
+    let mono = sfr(
+        &Plane::new(64, 64, e.clone()).unwrap(),
+        &SfrOptions::default(),
+    )
+    .unwrap();
+    let lum = sfr(
+        &mosaic_of(&e, [5.0, 20.0, 5.0], [50.0, 100.0, 0.0]),
+        &SfrOptions::default(),
+    )
+    .unwrap();
+    assert!(lum.mtf.iter().all(|m| m.is_finite()));
+    let (a, b) = (mono.mtf50_cy_per_px.unwrap(), lum.mtf50_cy_per_px.unwrap());
+    assert!((a / b - 1.0).abs() < 0.02, "MTF50 mono {a}, lum {b}");
+}
+
 /// A Bayer mosaic whose channels see the same edge with their own offset and
 /// gain (r 5 + 50·e, g 20 + 100·e, b 2 + 30·e): the `lum` estimate normalises
 /// each channel by its plateaus, so it measures the mono edge's MTF.
