@@ -917,6 +917,13 @@ fn steep_blurred_edge_matches_the_analytic_mtf_and_sits_at_zero() {
         ..Default::default()
     };
     assert_eq!(sfr(&p, &o).unwrap().mtf.len(), 126);
+    // Up to 0.3 cy/px: 0 … 18 (18.75 steps), and the noise check at 0.3 cy/px
+    // reads the last of them (0.3·62.5 rounds to 19, one past the table).
+    let o = SfrOptions {
+        max_freq_cy_per_px: 0.3,
+        ..Default::default()
+    };
+    assert_eq!(sfr(&p, &o).unwrap().mtf.len(), 19);
     assert_eq!(
         (r.freq_cy_per_px[1], r.freq_cy_per_px[62]),
         (4.0 / 250.0, 62.0 * 4.0 / 250.0)
