@@ -600,12 +600,31 @@ fn object_region_is_the_solid_interior() {
         .map(|i| ((10..22).contains(&(i % w)) && (5..17).contains(&(i / w))) as u32)
         .collect();
     assert!(object_roi(&small, &names, w, h, "edge").is_err());
+    // Narrow in one direction only (12 × 40 and 40 × 12): refused too.
+    for (xs, ys) in [(10..22, 5..45), (10..50, 5..17)] {
+        let thin: Vec<u32> = (0..w * h)
+            .map(|i| (xs.contains(&(i % w)) && ys.contains(&(i / w))) as u32)
+            .collect();
+        let e = object_roi(&thin, &names, w, h, "edge")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("no solid interior"), "{xs:?} {ys:?}: {e}");
+    }
     let e = object_roi(&vec![0; w * h], &names, w, h, "edge")
         .unwrap_err()
         .to_string();
     assert!(e.contains("not visible"), "{e}");
     assert!(object_roi(&labels, &names, w, h, "egde").is_err());
     assert!(object_roi(&labels[1..], &names, w, h, "edge").is_err());
+    // 30 px wide and tall (x 10..=39, y 5..=34): 15 % is 4.5, rounded to 5
+    // (29 or 28 px would give 4): x 15..=34, y 10..=29.
+    let square: Vec<u32> = (0..w * h)
+        .map(|i| ((10..40).contains(&(i % w)) && (5..35).contains(&(i / w))) as u32)
+        .collect();
+    assert_eq!(
+        object_roi(&square, &names, w, h, "edge").unwrap(),
+        Rect::new(15, 10, 20, 20)
+    );
 }
 
 /// A sharp edge 5° from the columns (or, `horizontal`, from the rows) through
