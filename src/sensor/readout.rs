@@ -408,6 +408,15 @@ mod tests {
     use super::*;
     use crate::sensor::config::{Exposure, Sources};
 
+    /// The shipped IMX363 sensor file.
+    fn imx363() -> SensorConfig {
+        SensorConfig::parse(
+            include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/sensors/imx363.kdl")),
+            std::path::Path::new("sensors/imx363.kdl"),
+        )
+        .unwrap()
+    }
+
     /// One pixel read out the direct way, draw after draw on each pixel's streams
     /// (the model as the pipeline's module docs state it).
     fn pixel_by_pixel(ro: &Readout, cfg: &SensorConfig, gi: u64, c: usize, mu: f64) -> [f32; 3] {
@@ -430,11 +439,7 @@ mod tests {
     /// switch (10), zero, huge and infinite means, with every noise source on.
     #[test]
     fn row_passes_equal_pixel_by_pixel_at_every_level() {
-        let mut cfg = SensorConfig::parse(
-            include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/sensors/imx363.kdl")),
-            std::path::Path::new("sensors/imx363.kdl"),
-        )
-        .unwrap();
+        let mut cfg = imx363();
         cfg.exposure = Exposure::Seconds(0.01);
         cfg.reset_noise_v = 3e-4;
         cfg.column_fpn_gain = 0.01;
@@ -527,11 +532,7 @@ mod tests {
     /// from dark to beyond the full well.
     #[test]
     fn each_source_switches_only_its_own_step() {
-        let mut base = SensorConfig::parse(
-            include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/sensors/imx363.kdl")),
-            std::path::Path::new("sensors/imx363.kdl"),
-        )
-        .unwrap();
+        let mut base = imx363();
         base.reset_noise_v = 3e-4;
         base.column_fpn_gain = 0.01;
         base.column_fpn_offset_v = 2e-4;
@@ -584,11 +585,7 @@ mod tests {
     /// Dark electrons over the exposure join the mean only with dark current on.
     #[test]
     fn dark_current_adds_its_electrons_to_the_mean() {
-        let mut cfg = SensorConfig::parse(
-            include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/sensors/imx363.kdl")),
-            std::path::Path::new("sensors/imx363.kdl"),
-        )
-        .unwrap();
+        let mut cfg = imx363();
         cfg.dark_voltage_v_per_s = 2e-3;
         let w = Rect::new(0, 0, 4, 1);
         let ro = Readout::new(&cfg, (4, 1), w, 0.5, 1);
@@ -606,11 +603,7 @@ mod tests {
     /// σ/√(2n) for a standard deviation of normal draws).
     #[test]
     fn column_fpn_is_gain_and_offset_from_the_columns_stream() {
-        let mut cfg = SensorConfig::parse(
-            include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/sensors/imx363.kdl")),
-            std::path::Path::new("sensors/imx363.kdl"),
-        )
-        .unwrap();
+        let mut cfg = imx363();
         cfg.column_fpn_gain = 0.01;
         cfg.column_fpn_offset_v = 2e-4;
         cfg.fpn_seed = 7;
@@ -685,11 +678,7 @@ mod tests {
     /// values, only slower, so this is what tells the two apart.
     #[test]
     fn first_passes_finish_the_common_case() {
-        let mut cfg = SensorConfig::parse(
-            include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/sensors/imx363.kdl")),
-            std::path::Path::new("sensors/imx363.kdl"),
-        )
-        .unwrap();
+        let mut cfg = imx363();
         let n = 4000;
         let means: Vec<f32> = (0..n)
             .map(|i| match i % 4 {

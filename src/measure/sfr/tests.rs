@@ -888,6 +888,13 @@ fn gaussian_edge_mtf(sigma: f64, f: f64) -> f64 {
         * sinc(f / 4.0)
 }
 
+/// Where the ESF first reaches ½, px (linear interpolation between bins).
+fn esf_half_crossing_px(r: &Sfr) -> f64 {
+    let k = r.esf.iter().position(|&v| v >= 0.5).unwrap();
+    r.esf_x_px[k - 1]
+        + (0.5 - r.esf[k - 1]) / (r.esf[k] - r.esf[k - 1]) * (r.esf_x_px[k] - r.esf_x_px[k - 1])
+}
+
 /// On a steeper edge (12°: distances along the rows are 2 % longer than
 /// across the edge, so a wrong projection shows) the whole estimate against
 /// the analytic MTF, and the ESF and LSF where the edge is: ESF in the
@@ -958,9 +965,7 @@ fn steep_blurred_edge_matches_the_analytic_mtf_and_sits_at_zero() {
         "{:?}",
         &r.esf[n - 20..]
     );
-    let k = r.esf.iter().position(|&v| v >= 0.5).unwrap();
-    let x_half = r.esf_x_px[k - 1]
-        + (0.5 - r.esf[k - 1]) / (r.esf[k] - r.esf[k - 1]) * (r.esf_x_px[k] - r.esf_x_px[k - 1]);
+    let x_half = esf_half_crossing_px(&r);
     assert!(x_half.abs() < 0.15, "ESF crosses ½ at {x_half} px");
     let area: f64 = r.lsf.iter().sum::<f64>() * 0.25;
     let centroid = r
@@ -1029,25 +1034,7 @@ fn lum_of_a_mosaic_with_unequal_channels_is_the_edge_mtf() {
         &SfrOptions::default(),
     )
     .unwrap();
-    let (gain, offset) = ([50.0, 100.0, 30.0], [5.0, 20.0, 2.0]);
-    let ch = |x: usize, y: usize| match (x % 2, y % 2) {
-        (0, 0) => 0u8,
-        (1, 1) => 2,
-        _ => 1,
-    };
-    let mut p = Plane::new(
-        64,
-        64,
-        (0..64 * 64)
-            .map(|i| {
-                let c = ch(i % 64, i / 64) as usize;
-                offset[c] + gain[c] * e[i]
-            })
-            .collect(),
-    )
-    .unwrap();
-    p.channel = (0..64 * 64).map(|i| ch(i % 64, i / 64)).collect();
-    p.channel_names = vec!["r".into(), "g".into(), "b".into()];
+    let p = mosaic_of(&e, [5.0, 20.0, 2.0], [50.0, 100.0, 30.0]);
     let lum = sfr(&p, &SfrOptions::default()).unwrap();
     // Each channel's dark plateau is 0 and bright plateau 1 after normalising.
     let n = lum.esf.len();
@@ -1061,9 +1048,7 @@ fn lum_of_a_mosaic_with_unequal_channels_is_the_edge_mtf() {
     // The mosaic's edge is located on 2×2 block means, whose centres lie half
     // a pixel in: it still crosses ½ at x = 0 (a row off would move it tan 12°
     // = 0.21 px).
-    let k = lum.esf.iter().position(|&v| v >= 0.5).unwrap();
-    let x_half =
-        lum.esf_x_px[k - 1] + (0.5 - lum.esf[k - 1]) / (lum.esf[k] - lum.esf[k - 1]) * 0.25;
+    let x_half = esf_half_crossing_px(&lum);
     println!("mosaic ESF crosses ½ at {x_half} px");
     assert!(x_half.abs() < 0.08, "ESF crosses ½ at {x_half} px");
     let (a, b) = (mono.mtf50_cy_per_px.unwrap(), lum.mtf50_cy_per_px.unwrap());

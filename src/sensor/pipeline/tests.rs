@@ -390,16 +390,30 @@ fn run_on_a_coarser_optical_grid_repeats_each_pixel() {
     }
 }
 
-/// Relative illumination scales the signal on the same-grid path and the
-/// resampling path alike.
-#[test]
-fn run_applies_relative_illumination_on_both_paths() {
-    let mut c = rgb_linear();
+/// Relative illumination falling linearly from 1 on axis to 0.5 at 10 µm,
+/// with pixel vignetting on.
+fn vignette(c: &mut SensorConfig) {
     c.relative_illumination = RelativeIllumination::Table {
         field_height_mm: vec![0.0, 0.01],
         value: vec![1.0, 0.5],
     };
     c.sources.pixel_vignetting = true;
+}
+
+/// [`vignette`]'s factor at pixel (x, y) of a `full`×`full` sensor of 2 µm
+/// pixels, by hand: 1 − 0.5·h/10 µm, h from the sensor centre.
+fn hand_ri(x: u32, y: u32, full: u32) -> f64 {
+    let dx = (x as f64 + 0.5 - full as f64 / 2.0) * 2e-3;
+    let dy = (y as f64 + 0.5 - full as f64 / 2.0) * 2e-3;
+    1.0 - 0.5 * (dx * dx + dy * dy).sqrt() / 0.01
+}
+
+/// Relative illumination scales the signal on the same-grid path and the
+/// resampling path alike.
+#[test]
+fn run_applies_relative_illumination_on_both_paths() {
+    let mut c = rgb_linear();
+    vignette(&mut c);
     for (oi, full) in [
         (optical_image((4, 4), Rect::new(0, 0, 4, 4), 2e-6), 4u32),
         (optical_image((2, 2), Rect::new(0, 0, 2, 2), 4e-6), 4),
@@ -416,9 +430,7 @@ fn run_applies_relative_illumination_on_both_paths() {
             let ch = &c.cfa.channels[c.cfa.channel_at(x, y)];
             let (ox, oy) = oi_px(x, y);
             let e: Vec<f64> = (0..9).map(|b| irradiance_at(ox, oy, b)).collect();
-            let dx = (x as f64 + 0.5 - full as f64 / 2.0) * 2e-3;
-            let dy = (y as f64 + 0.5 - full as f64 / 2.0) * 2e-3;
-            let ri = 1.0 - 0.5 * (dx * dx + dy * dy).sqrt() / 0.01;
+            let ri = hand_ri(x, y, full);
             let i = (y * full + x) as usize;
             assert_linear_chain(&f, i, hand_electrons(ch, &e) * ri, &format!("({x}, {y})"));
         }
@@ -593,18 +605,11 @@ fn simulate_flat_of_zero_light_and_with_relative_illumination() {
     let window = Rect::new(0, 0, 4, 4);
     let f = simulate_flat(&c, &Spectrum::constant("dark", 0.0), &grid, window, 1).unwrap();
     assert!(f.mean_electrons.iter().all(|&e| e == 0.0));
-    c.relative_illumination = RelativeIllumination::Table {
-        field_height_mm: vec![0.0, 0.01],
-        value: vec![1.0, 0.5],
-    };
-    c.sources.pixel_vignetting = true;
+    vignette(&mut c);
     let f = simulate_flat(&c, &Spectrum::constant("flat", 2e-3), &grid, window, 1).unwrap();
     for (x, y) in [(0u32, 0u32), (1, 2), (3, 1)] {
         let ch = &c.cfa.channels[c.cfa.channel_at(x, y)];
-        let dx = (x as f64 - 1.5) * 2e-3;
-        let dy = (y as f64 - 1.5) * 2e-3;
-        let ri = 1.0 - 0.5 * (dx * dx + dy * dy).sqrt() / 0.01;
-        let want = hand_electrons(ch, &[2e-3; 9]) * ri;
+        let want = hand_electrons(ch, &[2e-3; 9]) * hand_ri(x, y, 4);
         assert_linear_chain(&f, (y * 4 + x) as usize, want, &format!("({x}, {y})"));
     }
 }
