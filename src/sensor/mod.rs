@@ -19,6 +19,7 @@ pub mod calibrate;
 pub mod config;
 pub mod config_file;
 pub mod flatfield;
+pub mod frame_buffer;
 pub mod nnls;
 pub mod output;
 pub mod pipeline;

@@ -28,7 +28,8 @@
 //! `SensorConfig::fpn_seed`; temporal noise on the frame seed.
 
 use super::config::{Exposure, RelativeIllumination, SensorConfig};
-use super::readout::{Readout, RowOut, Scratch};
+use super::frame_buffer;
+use super::readout::{Isa, Readout, RowOut, Scratch};
 pub use super::readout::{fpn_column, fpn_pixel};
 use crate::diag::{Error, Result};
 use crate::image::SensorImage;
@@ -213,21 +214,17 @@ fn run(cfg: &SensorConfig, oi: &OpticalImage, seed: u64, keep: bool) -> Result<S
         let phases = channel_rows(cfg, window);
         let use_ri = ri_active(cfg);
         let ym = &ym;
+        let isa = Isa::detect();
         Box::new(move |r, row| {
             let yf = window.y + r as u32;
             let oy = ym.weights[r][0].0 as usize;
             let chans = &phases[(yf % cfg.cfa.height) as usize];
             let base = (oy * oiw + x0) * nb;
-            let mut bad = false;
-            for (cix, out) in row.iter_mut().enumerate() {
-                let p = &irr[base + cix * nb..][..nb];
-                let (d, ok) = dot_check(&wf[chans[cix] as usize], p);
-                bad |= !ok;
-                *out = if use_ri {
-                    (d as f64 * ri_at(cfg, full, window.x + cix as u32, yf)) as f32
-                } else {
-                    d
-                };
+            let bad = dot_row(isa, &wf, chans, &irr[base..][..row.len() * nb], nb, row);
+            if use_ri {
+                for (cix, out) in row.iter_mut().enumerate() {
+                    *out = (*out as f64 * ri_at(cfg, full, window.x + cix as u32, yf)) as f32;
+                }
             }
             bad
         })
@@ -287,32 +284,124 @@ fn run(cfg: &SensorConfig, oi: &OpticalImage, seed: u64, keep: bool) -> Result<S
     Ok(f)
 }
 
+/// One window row's signal rates on the same grid: `out[c]` = the weights of
+/// column c's channel (`chans[c]`) · its spectrum (`irr`, `nb` bands per
+/// pixel), and true when a spectrum is invalid ([`dot_check`]). Runs with the
+/// kernel compiled for `isa`, as the readout does (`readout::Isa`): the same
+/// IEEE operations in the same order at every level, so the same bits.
+fn dot_row(
+    isa: Isa,
+    w: &[Vec<f32>],
+    chans: &[u8],
+    irr: &[f32],
+    nb: usize,
+    out: &mut [f32],
+) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    match isa {
+        // SAFETY: `isa` was detected on this CPU (Isa::detect).
+        Isa::Avx512 => unsafe { dot_row_avx512(w, chans, irr, nb, out) },
+        // SAFETY: as above.
+        Isa::Avx2 => unsafe { dot_row_avx2(w, chans, irr, nb, out) },
+        Isa::Baseline => dot_row_generic(w, chans, irr, nb, out),
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        let _ = isa;
+        dot_row_generic(w, chans, irr, nb, out)
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw,avx2,fma,bmi2")]
+fn dot_row_avx512(w: &[Vec<f32>], chans: &[u8], irr: &[f32], nb: usize, out: &mut [f32]) -> bool {
+    dot_row_generic(w, chans, irr, nb, out)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma,bmi2")]
+fn dot_row_avx2(w: &[Vec<f32>], chans: &[u8], irr: &[f32], nb: usize, out: &mut [f32]) -> bool {
+    dot_row_generic(w, chans, irr, nb, out)
+}
+
+#[inline(always)]
+fn dot_row_generic(w: &[Vec<f32>], chans: &[u8], irr: &[f32], nb: usize, out: &mut [f32]) -> bool {
+    let mut bad = false;
+    for ((o, &ch), p) in out.iter_mut().zip(chans).zip(irr.chunks_exact(nb)) {
+        let (d, ok) = dot_check(&w[ch as usize], p);
+        bad |= !ok;
+        *o = d;
+    }
+    bad
+}
+
 /// Dot product of weights and one pixel's spectrum, and whether the spectrum is
-/// valid (finite sum, no negative value); eight independent f32 lanes.
-#[inline]
+/// valid (finite sum, no negative value).
+///
+/// Sixteen f32 lanes: lane i adds bands i, i + 16, …; the bands after the last
+/// whole block of 16 are read as the spectrum's last 16 with the lanes already
+/// counted set to 0, and the lanes are then added as a binary tree (8, 4, 2, 1).
+/// Every step stays in vector registers (one 16-lane register with AVX-512,
+/// two with AVX2, four with SSE) and each level does the same IEEE operations
+/// in the same order, so the same bits (`readout::Isa`). Before, eight lanes
+/// summed one after another plus a scalar remainder took ≈ 3× as long per
+/// pixel: with 31 bands the per-pixel dependency chain, not memory, set the
+/// speed of `camsim bench sensor`'s first pass. Under 16 bands: one pass in
+/// order.
+#[inline(always)]
 fn dot_check(w: &[f32], p: &[f32]) -> (f32, bool) {
-    let mut acc = [0f32; 8];
-    let mut sum = [0f32; 8];
-    let mut neg = [false; 8];
-    let wc = w.chunks_exact(8);
-    let pc = p.chunks_exact(8);
-    let (wr, pr) = (wc.remainder(), pc.remainder());
-    for (a, b) in wc.zip(pc) {
-        for i in 0..8 {
+    const L: usize = 16;
+    let n = p.len();
+    let w = &w[..n];
+    if n < L {
+        let (mut d, mut s, mut neg) = (0f32, 0f32, false);
+        for (a, b) in w.iter().zip(p) {
+            d += a * b;
+            s += b;
+            neg |= *b < 0.0;
+        }
+        return (d, s.is_finite() && !neg);
+    }
+    let mut acc = [0f32; L];
+    let mut sum = [0f32; L];
+    let mut neg = [false; L];
+    let whole = n / L * L;
+    for (a, b) in w[..whole].chunks_exact(L).zip(p[..whole].chunks_exact(L)) {
+        for i in 0..L {
             acc[i] += a[i] * b[i];
             sum[i] += b[i];
             neg[i] |= b[i] < 0.0;
         }
     }
-    let mut d: f32 = acc.iter().sum();
-    let mut s: f32 = sum.iter().sum();
-    let mut n = neg.iter().any(|&x| x);
-    for (a, b) in wr.iter().zip(pr) {
-        d += a * b;
-        s += b;
-        n |= *b < 0.0;
+    let r = n - whole;
+    if r > 0 {
+        let (a, b) = (&w[n - L..], &p[n - L..]);
+        for i in 0..L {
+            let new = i >= L - r;
+            let x = if new { b[i] } else { 0.0 };
+            let y = if new { a[i] } else { 0.0 };
+            acc[i] += y * x;
+            sum[i] += x;
+            neg[i] |= x < 0.0;
+        }
     }
-    (d, s.is_finite() && !n)
+    (
+        lane_tree_sum(acc),
+        lane_tree_sum(sum).is_finite() && !neg.iter().any(|&x| x),
+    )
+}
+
+/// The sum of 16 lanes as a binary tree: lanes i and i + 8, then i and i + 4, …
+#[inline(always)]
+fn lane_tree_sum(mut v: [f32; 16]) -> f32 {
+    let mut half = 8;
+    while half > 0 {
+        for i in 0..half {
+            v[i] += v[i + half];
+        }
+        half /= 2;
+    }
+    v[0]
 }
 
 /// Channel index per window column, for each CFA row phase.
@@ -466,10 +555,17 @@ fn expose(
         }
     };
     let ro = Readout::new(cfg, full, window, t, seed);
-    let mut dv = vec![0f32; n];
-    let mut electrons = vec![0f32; n];
-    let mut volts = if keep { vec![0f32; n] } else { vec![] };
-    let mut mean = if keep { vec![0f32; n] } else { vec![] };
+    let buffer = |keep: bool| {
+        if keep {
+            frame_buffer::zeroed(n)
+        } else {
+            vec![]
+        }
+    };
+    let mut dv = buffer(true);
+    let mut electrons = buffer(true);
+    let mut volts = buffer(keep);
+    let mut mean = buffer(keep);
     // Every output row with its index; volts and mean rows only when kept.
     fn opt_rows(v: &mut [f32], ww: usize, rows: u32) -> Vec<Option<&mut [f32]>> {
         if v.is_empty() {

@@ -613,3 +613,89 @@ fn simulate_flat_of_zero_light_and_with_relative_illumination() {
         assert_linear_chain(&f, (y * 4 + x) as usize, want, &format!("({x}, {y})"));
     }
 }
+
+/// Spectra of `nb` bands from a small LCG (values in [0, 2)), `n` pixels.
+fn lcg_spectra(n: usize, nb: usize, seed: u64) -> Vec<f32> {
+    let mut x = seed;
+    (0..n * nb)
+        .map(|_| {
+            x = x
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (x >> 40) as f32 / (1u64 << 23) as f32
+        })
+        .collect()
+}
+
+/// The 16-lane dot product against the same sum in f64, for band counts
+/// below, at and around the lane count (3, 15, 16, 17, 31, 32, 61): each
+/// f32 product and sum rounds by ≤ 2⁻²⁴ relative, and with non-negative terms
+/// the accumulated error is at most (n + 4)·2⁻²⁴ of the sum (n terms in at
+/// most n additions down a lane and four tree levels); the bound used is that.
+#[test]
+fn dot_check_is_the_dot_product_within_f32_rounding() {
+    for nb in [3usize, 15, 16, 17, 31, 32, 61] {
+        let w = lcg_spectra(1, nb, 7 + nb as u64);
+        let p = lcg_spectra(1, nb, 99 + nb as u64);
+        let want: f64 = w.iter().zip(&p).map(|(&a, &b)| a as f64 * b as f64).sum();
+        let (d, ok) = dot_check(&w, &p);
+        assert!(ok, "{nb}");
+        let tol = (nb as f64 + 4.0) * f64::from(f32::EPSILON) / 2.0 * want;
+        assert!(
+            (d as f64 - want).abs() <= tol,
+            "{nb} bands: {d} vs {want} (tolerance {tol})"
+        );
+        // Every band counts once: one band set to 1000 (weights 1) raises the
+        // sum by 1000 − its value, whichever lane or overlap it falls in.
+        let ones = vec![1.0f32; nb];
+        let base = dot_check(&ones, &p).0 as f64;
+        for k in 0..nb {
+            let mut q = p.clone();
+            q[k] = 1000.0;
+            let got = dot_check(&ones, &q).0 as f64;
+            let want = base + 1000.0 - p[k] as f64;
+            assert!(
+                (got - want).abs() <= 1e-3,
+                "{nb} bands, band {k}: {got} vs {want}"
+            );
+        }
+    }
+}
+
+/// `dot_row` gives the same bits at every instruction set level this machine
+/// has (the same IEEE operations in the same order), for two channels
+/// alternating along the row as in a Bayer row, and reports an invalid
+/// spectrum wherever it is.
+#[test]
+fn dot_row_gives_the_same_bits_at_every_level() {
+    use crate::sensor::readout::Isa;
+    let levels: Vec<Isa> = [Isa::Baseline, Isa::Avx2, Isa::Avx512]
+        .into_iter()
+        .filter(|&l| l as u8 <= Isa::detect() as u8)
+        .collect();
+    for nb in [3usize, 16, 31] {
+        let n = 37;
+        let w = vec![lcg_spectra(1, nb, 1), lcg_spectra(1, nb, 2)];
+        let chans: Vec<u8> = (0..n).map(|c| (c % 2) as u8).collect();
+        let irr = lcg_spectra(n, nb, 3);
+        let mut first: Option<Vec<u32>> = None;
+        for &l in &levels {
+            let mut out = vec![0f32; n];
+            assert!(!dot_row(l, &w, &chans, &irr, nb, &mut out), "{l:?}");
+            for c in [0, 1, n - 1] {
+                assert_eq!(
+                    out[c].to_bits(),
+                    dot_check(&w[c % 2], &irr[c * nb..(c + 1) * nb]).0.to_bits()
+                );
+            }
+            let bits: Vec<u32> = out.iter().map(|x| x.to_bits()).collect();
+            match &first {
+                None => first = Some(bits),
+                Some(f) => assert_eq!(&bits, f, "{l:?}, {nb} bands"),
+            }
+            let mut bad = irr.clone();
+            bad[(n - 1) * nb + nb / 2] = -1.0;
+            assert!(dot_row(l, &w, &chans, &bad, nb, &mut out), "{l:?}");
+        }
+    }
+}
