@@ -164,6 +164,8 @@ pub struct Scratch {
     offset: Vec<f64>,
     n1: Vec<f64>,
     n2: Vec<f64>,
+    /// Volts.
+    v: Vec<f64>,
     /// Per pixel: the vectorised first pass was enough.
     ok: Vec<bool>,
 }
@@ -176,6 +178,7 @@ impl Scratch {
             &mut self.offset,
             &mut self.n1,
             &mut self.n2,
+            &mut self.v,
         ] {
             v.clear();
             v.resize(n, 0.0);
@@ -360,45 +363,81 @@ impl Readout {
                 }
             }
         }
+        // The rest in passes over the row, one per switched-on step, so each is a
+        // plain loop the compiler vectorises (one loop with a test per step per
+        // pixel stayed scalar). Per pixel the same operations in the same order.
         let RowOut {
             dv,
             electrons,
-            mut volts,
+            volts,
         } = out;
-        for c in 0..n {
-            let mut e = s.e[c];
-            if self.use_prnu {
-                e *= s.gain[c];
+        let e = &mut s.e[..n];
+        if self.use_prnu {
+            for (e, &g) in e.iter_mut().zip(&s.gain) {
+                *e *= g;
             }
-            if self.clipping {
-                e = e.min(self.full_well);
+        }
+        if self.clipping {
+            let fw = self.full_well;
+            for e in e.iter_mut() {
+                *e = e.min(fw);
             }
-            let mut v = e * self.cg;
-            if self.use_dsnu {
-                v += s.offset[c];
+        }
+        let v = &mut s.v[..n];
+        for (v, &e) in v.iter_mut().zip(e.iter()) {
+            *v = e * self.cg;
+        }
+        if self.use_dsnu {
+            for (v, &o) in v.iter_mut().zip(&s.offset) {
+                *v += o;
             }
-            if self.use_col {
-                let (cgn, coff) = self.cols[c];
-                v = v * cgn + coff;
+        }
+        if self.use_col {
+            for (v, &(cgn, coff)) in v.iter_mut().zip(&self.cols) {
+                *v = *v * cgn + coff;
             }
-            if self.use_read {
-                v += self.read_noise_v * s.n1[c];
+        }
+        if self.use_read {
+            let rn = self.read_noise_v;
+            for (v, &x) in v.iter_mut().zip(&s.n1) {
+                *v += rn * x;
             }
-            if self.use_reset {
-                v += self.reset_noise_v * s.n2[c];
+        }
+        if self.use_reset {
+            let rs = self.reset_noise_v;
+            for (v, &x) in v.iter_mut().zip(&s.n2) {
+                *v += rs * x;
             }
+        }
+        match (self.quantization, self.clipping) {
+            (false, false) => self.to_dv::<false, false>(v, dv),
+            (false, true) => self.to_dv::<false, true>(v, dv),
+            (true, false) => self.to_dv::<true, false>(v, dv),
+            (true, true) => self.to_dv::<true, true>(v, dv),
+        }
+        for (o, &e) in electrons.iter_mut().zip(e.iter()) {
+            *o = e as f32;
+        }
+        if let Some(vr) = volts {
+            for (o, &v) in vr.iter_mut().zip(v.iter()) {
+                *o = v as f32;
+            }
+        }
+    }
+
+    /// Digital values from volts: gain and black level, then rounding
+    /// (`QUANTIZE`) and clipping to [0, white] (`CLIP`).
+    #[inline(always)]
+    fn to_dv<const QUANTIZE: bool, const CLIP: bool>(&self, v: &[f64], dv: &mut [f32]) {
+        for (o, &v) in dv.iter_mut().zip(v) {
             let mut d = v * self.dv_per_v + self.black;
-            if self.quantization {
+            if QUANTIZE {
                 d = fast_round(d);
             }
-            if self.clipping {
+            if CLIP {
                 d = d.clamp(0.0, self.white);
             }
-            dv[c] = d as f32;
-            electrons[c] = e as f32;
-            if let Some(vr) = volts.as_deref_mut() {
-                vr[c] = v as f32;
-            }
+            *o = d as f32;
         }
     }
 }
