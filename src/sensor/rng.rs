@@ -634,3 +634,6 @@ mod tests {
         }
     }
 }
+
+#[cfg(test)]
+mod slow_path_tests;
