@@ -162,6 +162,12 @@ fn dot_check_sums_and_validates() {
     q[16] = 3e38;
     q[17] = 3e38;
     assert!(!dot_check(&w, &q).1);
+    // Under 16 bands (one pass in order): the same rules. Zeros of either
+    // sign are valid, a negative value is not, an overflowing sum is not.
+    let w3 = [1.0f32, 2.0, 3.0];
+    assert_eq!(dot_check(&w3, &[1.0, 0.0, -0.0]), (1.0, true));
+    assert!(!dot_check(&w3, &[1.0, -1.0, 0.0]).1);
+    assert!(!dot_check(&w3, &[3e38, 3e38, 0.0]).1);
 }
 
 #[test]
