@@ -110,3 +110,38 @@ fn render_isa_environment_variable_lowers_the_kernel() {
     let isa = camsim::render::simd::RenderIsa::detect().name();
     assert!(String::from_utf8_lossy(&out.stdout).contains(&format!("render kernel: {isa}\n")));
 }
+
+/// `camsim bench sensor --threads N` runs on N threads and says so (the flag
+/// was once ignored: the bench ran on every core while its report divided the
+/// CPU time by that count). With one thread, CPU time cannot exceed wall time
+/// by more than the clock's resolution (10 ms ticks) — two threads would
+/// give about twice the wall time.
+#[test]
+fn bench_sensor_honours_threads() {
+    let out = camsim()
+        .args(["bench", "sensor", "--threads", "1"])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let value = |q: &str| -> String {
+        stdout
+            .lines()
+            .find_map(|l| l.strip_prefix(&format!("sensor,{q},")))
+            .and_then(|rest| rest.split(',').nth(1))
+            .unwrap_or_else(|| panic!("no {q} in:\n{stdout}"))
+            .to_string()
+    };
+    assert_eq!(value("threads"), "1");
+    let wall: f64 = value("simulate_time_best_of_5").parse().unwrap();
+    if let Ok(cpu) = value("simulate_cpu_time").parse::<f64>() {
+        assert!(
+            cpu <= wall * 1.2 + 0.02,
+            "cpu {cpu} s over wall {wall} s on one thread"
+        );
+    }
+}

@@ -253,7 +253,13 @@ pub fn bench(a: BenchArgs) -> Result<i32> {
         }
         "parse" => super::scene::bench_parse(),
         "sensor" => {
-            println!("{}", camsim::sensor::bench_sensor()?);
+            // The simulation and the stream-read floor both run on a pool of
+            // --threads threads (0: one per core), as the render bench does.
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(a.threads)
+                .build()
+                .map_err(|e| Error::Invalid(format!("thread pool: {e}")))?;
+            println!("{}", pool.install(camsim::sensor::bench_sensor)?);
             Ok(0)
         }
         other => Err(Error::NotSupported(format!(
