@@ -13,6 +13,18 @@ fn bench_1spp() -> Command {
     c
 }
 
+/// The standard output of `c`, which must succeed (else its output is shown).
+fn stdout_of_success(c: &mut Command) -> String {
+    let out = c.output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    stdout
+}
+
 fn read_pfm_mean(p: &std::path::Path) -> f64 {
     let (w, h, d) = camsim::render::bench::read_pfm(p).unwrap();
     assert_eq!((w, h), (256, 256));
@@ -28,16 +40,10 @@ fn bench_scene_mean_luminance_matches_mitsuba() {
     // catches a wrong spectrum, emitter scale, camera or bounce count.
     let dir = tempfile::tempdir().unwrap();
     let y = dir.path().join("y.pfm");
-    let out = bench_1spp()
-        .args(["--ref-spp", "0", "--threads", "2", "--y-out"])
-        .arg(&y)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&out.stderr)
+    let stdout = stdout_of_success(
+        bench_1spp()
+            .args(["--ref-spp", "0", "--threads", "2", "--y-out"])
+            .arg(&y),
     );
     assert!(stdout.contains("camsim-bench spp=1 "), "{stdout}");
     // the machine beside the speed (issue 17): "cpu: MODEL (VECTOR WIDTH)"
@@ -118,16 +124,7 @@ fn render_isa_environment_variable_lowers_the_kernel() {
 /// give about twice the wall time.
 #[test]
 fn bench_sensor_honours_threads() {
-    let out = camsim()
-        .args(["bench", "sensor", "--threads", "1"])
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let stdout = stdout_of_success(camsim().args(["bench", "sensor", "--threads", "1"]));
     let value = |q: &str| -> String {
         stdout
             .lines()

@@ -47,15 +47,37 @@ fn streams_can_be_built_to_give_an_output() {
     }
 }
 
-/// PTRS's constants as Hörmann (1993) gives them: b = 0.931 + 2.53·√μ,
-/// a = −0.059 + 0.02483·b, v_r = 0.9277 − 3.6224/(b − 2); the code returns
-/// (a, b, b − 2, v_r·(b − 2)). Tolerance: a few f64 roundings.
+/// PTRS's constants at mean μ as Hörmann (1993) states them, written here
+/// from the paper, not from `ptrs_constants`.
+struct Hoermann {
+    /// b = 0.931 + 2.53·√μ
+    b: f64,
+    /// a = −0.059 + 0.02483·b
+    a: f64,
+    /// α⁻¹ = 1.1239 + 1.1328/(b − 3.4)
+    inv_alpha: f64,
+    /// v_r = 0.9277 − 3.6224/(b − 2)
+    v_r: f64,
+}
+
+impl Hoermann {
+    fn at(mu: f64) -> Self {
+        let b = 0.931 + 2.53 * mu.sqrt();
+        Hoermann {
+            b,
+            a: -0.059 + 0.02483 * b,
+            inv_alpha: 1.1239 + 1.1328 / (b - 3.4),
+            v_r: 0.9277 - 3.6224 / (b - 2.0),
+        }
+    }
+}
+
+/// The code's PTRS constants are the paper's: it returns (a, b, b − 2,
+/// v_r·(b − 2)). Tolerance: a few f64 roundings.
 #[test]
 fn ptrs_constants_are_hoermanns() {
     for mu in [10.0f64, 25.0, 137.5, 5000.0] {
-        let b = 0.931 + 2.53 * mu.sqrt();
-        let a = -0.059 + 0.02483 * b;
-        let v_r = 0.9277 - 3.6224 / (b - 2.0);
+        let Hoermann { a, b, v_r, .. } = Hoermann::at(mu);
         let (ga, gb, gbm2, gv) = ptrs_constants(mu);
         let close = |x: f64, y: f64| (x - y).abs() <= 1e-14 * y.abs().max(1.0);
         assert!(close(ga, a) && close(gb, b), "μ {mu}");
@@ -72,10 +94,14 @@ fn uniform_open0_excludes_zero_and_reaches_one() {
     assert_eq!(stream_giving(0).uniform(), 0.0);
 }
 
+/// The standard normal density.
+fn phi(t: f64) -> f64 {
+    (-0.5 * t * t).exp() / (2.0 * std::f64::consts::PI).sqrt()
+}
+
 /// ∫ₓ^∞ φ by Simpson's rule on [x, x + 14] (the rest < 10⁻⁴⁴), 2·10⁴
 /// intervals: error ≲ 10⁻¹⁵ relative for the x used here.
 fn upper_tail(x: f64) -> f64 {
-    let phi = |t: f64| (-0.5 * t * t).exp() / (2.0 * std::f64::consts::PI).sqrt();
     let n = 20_000;
     let h = 14.0 / n as f64;
     let mut s = phi(x) + phi(x + 14.0);
@@ -172,7 +198,6 @@ struct NormalCdf(Vec<f64>);
 impl NormalCdf {
     const H: f64 = 1e-3;
     fn new() -> Self {
-        let phi = |t: f64| (-0.5 * t * t).exp() / (2.0 * std::f64::consts::PI).sqrt();
         let n = (16.0 / Self::H) as usize;
         let mut c = vec![0.0; n + 1];
         for j in 0..n {
@@ -254,12 +279,11 @@ fn ln_factorial_matches_a_compensated_sum() {
 
 /// Hörmann's full acceptance test, the paper's way, for one proposal
 /// (k, u_s, v) at mean μ: accept when ln(v·α⁻¹/(a/u_s² + b)) ≤ −μ + k ln μ −
-/// ln k!, with α⁻¹ = 1.1239 + 1.1328/(b − 3.4); reject at once when k < 0 or
-/// (u_s < 0.013 and v > u_s).
+/// ln k!; reject at once when k < 0 or (u_s < 0.013 and v > u_s).
 fn hoermann_accepts(mu: f64, k: f64, us: f64, v: f64) -> bool {
-    let b = 0.931 + 2.53 * mu.sqrt();
-    let a = -0.059 + 0.02483 * b;
-    let inv_alpha = 1.1239 + 1.1328 / (b - 3.4);
+    let Hoermann {
+        a, b, inv_alpha, ..
+    } = Hoermann::at(mu);
     if k < 0.0 || (us < 0.013 && v > us) {
         return false;
     }
@@ -299,9 +323,9 @@ fn ptrs_slow_path_decides_as_hoermann() {
     // The boundary in v of the full test, for proposals above the mode (near
     // it v would pass 1 and every proposal is accepted).
     for (mu, k, us) in [(10.0, 14.0, 0.3), (37.5, 46.0, 0.2), (1000.0, 1040.0, 0.25)] {
-        let b = 0.931 + 2.53 * f64::sqrt(mu);
-        let a = -0.059 + 0.02483 * b;
-        let inv_alpha = 1.1239 + 1.1328 / (b - 3.4);
+        let Hoermann {
+            a, b, inv_alpha, ..
+        } = Hoermann::at(mu);
         let rhs = -mu + k * f64::ln(mu) - ln_factorial(k);
         let v_max = rhs.exp() * (a / (us * us) + b) / inv_alpha;
         assert!(
