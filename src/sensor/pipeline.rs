@@ -555,17 +555,17 @@ fn expose(
         }
     };
     let ro = Readout::new(cfg, full, window, t, seed);
-    let buffer = |keep: bool| {
+    let kept = || {
         if keep {
             frame_buffer::zeroed(n)
         } else {
             vec![]
         }
     };
-    let mut dv = buffer(true);
-    let mut electrons = buffer(true);
-    let mut volts = buffer(keep);
-    let mut mean = buffer(keep);
+    let mut dv = frame_buffer::zeroed(n);
+    let mut electrons = frame_buffer::zeroed(n);
+    let mut volts = kept();
+    let mut mean = kept();
     // Every output row with its index; volts and mean rows only when kept.
     fn opt_rows(v: &mut [f32], ww: usize, rows: u32) -> Vec<Option<&mut [f32]>> {
         if v.is_empty() {
