@@ -148,9 +148,15 @@ def machine_cpu():
         return "unknown"
 
 
+# camsim's batches and sampler for the timed renders (set in main()).
+CAMSIM_BATCHES = [1]
+CAMSIM_SAMPLER = ["sobol"]
+
+
 def run_camsim(camsim, spp, seed, y_out, threads):
     cmd = [camsim, "bench", "render", "--spp", str(spp), "--ref-spp", "0", "--bvh", "bvh4",
-           "--threads", str(threads), "--seed", str(seed), "--y-out", y_out]
+           "--threads", str(threads), "--seed", str(seed), "--y-out", y_out,
+           "--batches", str(CAMSIM_BATCHES[0]), "--sampler", CAMSIM_SAMPLER[0]]
     out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
     CAMSIM_CPU.extend(line[len("cpu: "):] for line in out.splitlines() if line.startswith("cpu: "))
     kv_line = [line for line in out.splitlines() if line.startswith("camsim-bench ")][-1]
@@ -179,7 +185,12 @@ def main():
     ap.add_argument("--camsim-conv-spp", type=int, default=256, help="per half of camsim's converged image (0: skip)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--seeds", type=int, default=4, help="independent timed renders per measurement")
+    ap.add_argument("--batches", type=int, default=1,
+                    help="camsim's sample batches (1: one image, like Mitsuba's; 8: the renderer's default, with a standard error)")
+    ap.add_argument("--sampler", default="sobol", help="camsim's sampler: sobol or independent")
     a = ap.parse_args()
+    CAMSIM_BATCHES[0] = a.batches
+    CAMSIM_SAMPLER[0] = a.sampler
     os.makedirs(a.cache, exist_ok=True)
 
     mi, dr, variant, scene = load_mitsuba(a.threads)
@@ -203,7 +214,7 @@ def main():
 
     # camsim's converged image: two independent halves give its own noise.
     if a.camsim_conv_spp > 0:
-        tag = f"camsim-{file_sha(a.camsim)}-{a.camsim_conv_spp}spp"
+        tag = f"camsim-{file_sha(a.camsim)}-{a.camsim_conv_spp}spp-{a.sampler}-{a.batches}b"
         halves = []
         for seed in (101, 102):
             p = os.path.join(a.cache, f"{tag}-seed{seed}_y.pfm")
@@ -297,7 +308,8 @@ def main():
     print(f"RATIO camsim/Mitsuba: paths/s {pps_c / (paths / tm):.3f} (wall), {cm / cc:.3f} (CPU); "
           f"equal-time RMSE {res[k_all][1]:.3f} (wall), {res[k_all][2]:.3f} (CPU); "
           f"light transport only {res[k_lt][1]:.3f} (wall); equal-spp RMSE {res[k_all][0]:.3f}  [RMSE < 1 = camsim better]; "
-          f"CPU {machine_cpu()}, camsim kernel {CAMSIM_ISA[-1] if CAMSIM_ISA else '?'}, load {os.getloadavg()[0]:.1f}")
+          f"CPU {machine_cpu()}, camsim kernel {CAMSIM_ISA[-1] if CAMSIM_ISA else '?'}, "
+          f"camsim sampler {a.sampler} in {a.batches} batch(es), load {os.getloadavg()[0]:.1f}")
     with open(os.path.join(a.cache, "last_result.json"), "w") as f:
         json.dump({"load_average": os.getloadavg()[0], "cpu": machine_cpu(),
                    "mitsuba": {"variant": variant, "spp": a.spp, "wall_s": tm, "cpu_s": cm, "rel_rmse": rm},

@@ -22,7 +22,11 @@
 #   bench/mitsuba_compare.sh [MITSUBA_SPP]        (default 32)
 # Environment: CARGO_TARGET_DIR, BENCH_DIR, MITSUBA_VENV, CAMSIM,
 #   REF_SPP (1024), CONV_SPP (256 per half; 0 skips the agreement check),
-#   SEEDS (4 timed renders per measurement).
+#   SEEDS (4 timed renders per measurement), BATCHES (camsim's sample
+#   batches, 1: one image with no standard error, as Mitsuba renders; 8 is the
+#   renderer's default for experiments, which estimate their error from the
+#   batch spread at the cost of stratifying only spp/8 points per batch),
+#   SAMPLER (camsim's sampler: sobol, the default, or independent).
 set -euo pipefail
 SPP="${1:-32}"
 HERE="$(cd "$(dirname "$0")/.." && pwd)"
@@ -49,4 +53,5 @@ fi
 
 exec "$VENV/bin/python" "$HERE/bench/mitsuba_compare.py" \
     --camsim "$CAMSIM" --cache "$BENCH_DIR" --spp "$SPP" \
-    --ref-spp "${REF_SPP:-1024}" --camsim-conv-spp "${CONV_SPP:-256}" --seeds "${SEEDS:-4}" --threads 2
+    --ref-spp "${REF_SPP:-1024}" --camsim-conv-spp "${CONV_SPP:-256}" --seeds "${SEEDS:-4}" --threads 2 \
+    --batches "${BATCHES:-1}" --sampler "${SAMPLER:-sobol}"

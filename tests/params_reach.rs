@@ -485,6 +485,7 @@ fn probe(
                 "spp" => num(r.spp as f64),
                 "max-bounces" => num(r.max_bounces as f64),
                 "seed" => num(r.seed as f64),
+                "sampler" => text(r.sampler.name()),
                 "wavelength-nm" => Some(Value::List(vec![
                     Value::Number(r.grid.start_nm),
                     Value::Number(r.grid.start_nm + r.grid.step_nm * (r.grid.count as f64 - 1.0)),

@@ -45,6 +45,7 @@ fn settings(spp: u32, max_bounces: u32) -> RenderSettings {
         threads: 0,
         roi: None,
         stderr_weights: vec![],
+        sampler: Default::default(),
     }
 }
 

@@ -5,7 +5,7 @@ mod common;
 
 use camsim::image::CfaPattern;
 use camsim::measure::compare::{Pair, compare};
-use camsim::measure::convergence::{Run, convergence};
+use camsim::measure::convergence::{ErrorLaw, Run, convergence};
 use camsim::measure::noise::{NoiseOptions, measure as noise_measure};
 use camsim::measure::plane::{Plane, channel_views};
 use camsim::measure::ri::{RiOptions, relative_illumination};
@@ -269,6 +269,7 @@ fn run(dir: &Path, seed: u64, power: f64) {
             "cy/px",
             "convergence",
             0.0,
+            ErrorLaw::InverseSqrt,
         )
         .unwrap();
         write_curves(dir, variant, "convergence", &m.curves).unwrap();

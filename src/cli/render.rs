@@ -67,6 +67,13 @@ pub struct BenchArgs {
     /// render: write the timed render's CIE Y image (grey PFM).
     #[arg(long)]
     pub y_out: Option<PathBuf>,
+    /// render: independent sample batches of the timed render (the renderer's
+    /// standard-error estimate; each batch is stratified and scrambled on its own).
+    #[arg(long, default_value_t = camsim::render::RenderSettings::default().batches)]
+    pub batches: u32,
+    /// render: the timed render's sampler: sobol (the renderer's default) or independent.
+    #[arg(long, default_value = "sobol")]
+    pub sampler: String,
 }
 
 fn parse_roi(s: &str) -> Result<Rect> {
@@ -236,6 +243,12 @@ pub fn bench(a: BenchArgs) -> Result<i32> {
                     )));
                 }
             };
+            let sampler = camsim::render::SamplerKind::parse(&a.sampler).ok_or_else(|| {
+                Error::invalid(format!(
+                    "--sampler '{}': expected sobol or independent",
+                    a.sampler
+                ))
+            })?;
             let r = camsim::render::bench::run(&camsim::render::bench::BenchOptions {
                 spp: a.spp,
                 ref_spp: a.ref_spp,
@@ -246,6 +259,8 @@ pub fn bench(a: BenchArgs) -> Result<i32> {
                 reference: a.reference,
                 reference_var: a.reference_var,
                 y_out: a.y_out,
+                batches: a.batches,
+                sampler,
             })?;
             println!("cpu: {}", camsim::machine::cpu());
             println!("{r}");

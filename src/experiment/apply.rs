@@ -330,6 +330,14 @@ pub fn apply(
             "max-bounces" => spec.render.max_bounces = as_int(v, "max-bounces", 0, 1000)? as u32,
             "seed" => spec.render.seed = as_int(v, "seed", 0, 1u64 << 53)?,
             "wavelength-nm" => spec.render.wavelength = as_grid(v, "wavelength-nm")?,
+            "sampler" => {
+                let name = as_str(v, "sampler")?;
+                spec.render.sampler = crate::render::SamplerKind::parse(name).ok_or_else(|| {
+                    ApplyError::new(format!(
+                        "'sampler': expected \"sobol\" or \"independent\", found \"{name}\""
+                    ))
+                })?
+            }
             "target-stderr" => {
                 spec.render.target_stderr = Some(as_stderr_target(v, "target-stderr")?)
             }

@@ -74,6 +74,13 @@ pub static RENDER_SCHEMA: Schema = Schema {
             "(410 690 20)",
         ),
         ParamSpec::new(
+            "sampler",
+            Kind::Choice(&["sobol", "independent"]),
+            "sobol",
+            "the renderer's random numbers: \"sobol\" stratifies each batch's samples over the pixel, pupil, light and first two bounces (Owen-scrambled Sobol; error falls at least as fast as N^(−½), often faster), \"independent\" draws them independently (error ∝ N^(−½) exactly)",
+            "\"independent\"",
+        ),
+        ParamSpec::new(
             "target-stderr",
             Kind::NumberOr(&["\"N%\""]),
             "none",

@@ -603,6 +603,12 @@ pub fn convergence(m: &Measure, spec: &ResolvedExperiment) -> Result<Measured> {
     sub.measures = vec![inner.clone()];
     let sensor_only = inner.kind == "conversion-gain";
     let label = if sensor_only { "frames" } else { "spp" };
+    // Frames are independent; rendered figures follow the sampler's law.
+    let law = if sensor_only || spec.render.sampler == crate::render::SamplerKind::Independent {
+        conv::ErrorLaw::InverseSqrt
+    } else {
+        conv::ErrorLaw::AtLeastInverseSqrt
+    };
     // The renderer's scene and camera are built once; a run's wall time is
     // what the run itself costs (label pass, render, sensor, measurement).
     let built = if sensor_only {
@@ -738,7 +744,7 @@ pub fn convergence(m: &Measure, spec: &ResolvedExperiment) -> Result<Measured> {
             .as_ref()
             .and_then(|r| r.iter().find(|f| &f.quantity == q && f.unit == f0.unit))
             .map(|f| (f.value, f.stderr));
-        let mut c = conv::convergence(&series, rv, q, &f0.unit, &m.name, clipped)?;
+        let mut c = conv::convergence(&series, rv, q, &f0.unit, &m.name, clipped, law)?;
         for (n, r) in counts_of.iter().zip(&series) {
             c.figures.push(Figure::new(
                 &m.name,

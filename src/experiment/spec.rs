@@ -123,6 +123,8 @@ pub struct RenderSettings {
     pub seed: u64,
     /// Wavelength grid `wavelength-nm=(start stop step)`.
     pub wavelength: WavelengthGrid,
+    /// `sampler="sobol"|"independent"`: the renderer's random numbers.
+    pub sampler: crate::render::SamplerKind,
     /// `target-stderr=…`: error-driven sampling. With a target, `spp` is the
     /// first round and the render goes on in rounds until every figure meets
     /// its target (or a budget is spent); see [`super::sampling`].
@@ -170,6 +172,7 @@ impl Default for RenderSettings {
             max_bounces: 5,
             seed: 0,
             wavelength: WavelengthGrid::default(),
+            sampler: crate::render::SamplerKind::default(),
             target_stderr: None,
             targets: Vec::new(),
             max_s: None,

@@ -256,6 +256,7 @@ pub fn render_settings(spec: &ResolvedExperiment) -> Result<RenderSettings> {
         max_bounces: spec.render.max_bounces,
         grid: spec.render.wavelength.clone(),
         seed: spec.render.seed,
+        sampler: spec.render.sampler,
         ..Default::default()
     })
 }

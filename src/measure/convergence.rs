@@ -9,8 +9,12 @@
 //! the first while a fixed cost per run — label pass, sensor, measurement —
 //! is not small beside the render, and it varies with the machine's load).
 //! The flag `slope_off_minus_half` tests the sample slope, so the same seed
-//! gives the same flag: |b + ½| > t₉₅(n − 2)·se ([`slope_off`]); figures of
-//! clipped pixels are always flagged. [`flag_notes`] writes the report's note
+//! gives the same flag ([`slope_off`]): with independent samples (the
+//! `independent` sampler, sensor frames) |b + ½| > t₉₅(n − 2)·se; with the
+//! default Sobol sampler, whose scrambled nets converge at least as fast as
+//! N^(−½) and often faster, only a slope significantly shallower than −½
+//! (b + ½ > t₉₅(n − 2)·se) is flagged. Figures of clipped pixels are always
+//! flagged. [`flag_notes`] writes the report's note
 //! for a flagged figure with its likely reason. The efficiency 1/(se²·t) (the
 //! usual figure of merit, 1/(unit²·s)) compares methods at equal time.
 
@@ -127,10 +131,32 @@ pub fn t95(dof: usize) -> f64 {
     }
 }
 
-/// Whether a fitted slope `b ± se` from `n` runs is off −½: no uncertainty
-/// (fewer than 3 runs, or an exact fit) or |b + ½| > t₉₅(n − 2)·se.
-pub fn slope_off(b: f64, se: f64, n: usize) -> bool {
-    !(b.is_finite() && se.is_finite() && se > 0.0 && n >= 3) || (b + 0.5).abs() > t95(n - 2) * se
+/// How a figure's standard error should fall with the sample count N.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ErrorLaw {
+    /// Independent samples (the independent sampler, sensor frames):
+    /// exactly ∝ N^(−½).
+    InverseSqrt,
+    /// Scrambled nets (the Sobol sampler, `render::sampler`): at least as
+    /// fast as N^(−½) — Owen (1997) — and faster for smooth integrands; a
+    /// figure that also carries independent noise (the sensor's) falls
+    /// between the two rates.
+    AtLeastInverseSqrt,
+}
+
+/// Whether a fitted slope `b ± se` from `n` runs is off the law: no
+/// uncertainty (fewer than 3 runs, or an exact fit) always is; otherwise
+/// |b + ½| > t₉₅(n − 2)·se for `InverseSqrt`, and b + ½ > t₉₅(n − 2)·se
+/// (falling significantly slower than N^(−½)) for `AtLeastInverseSqrt`.
+pub fn slope_off(b: f64, se: f64, n: usize, law: ErrorLaw) -> bool {
+    if !(b.is_finite() && se.is_finite() && se > 0.0 && n >= 3) {
+        return true;
+    }
+    let excess = match law {
+        ErrorLaw::InverseSqrt => (b + 0.5).abs(),
+        ErrorLaw::AtLeastInverseSqrt => b + 0.5,
+    };
+    excess > t95(n - 2) * se
 }
 
 /// Figures a run's wall time enters (not reproducible from the seed: they
@@ -158,6 +184,7 @@ pub fn convergence(
     unit: &str,
     measurement: &str,
     clipped: f64,
+    law: ErrorLaw,
 ) -> Result<Measured> {
     let mut ok: Vec<&Run> = runs
         .iter()
@@ -188,7 +215,7 @@ pub fn convergence(
     }
     // Clipped pixels make the standard error a measure of the clipping, not
     // of the Monte Carlo noise: always flagged, whatever the slope.
-    let off = clipped > 0.0 || slope_off(b, sb, ok.len());
+    let off = clipped > 0.0 || slope_off(b, sb, ok.len(), law);
     figures.push(fig(
         "slope_off_minus_half",
         "1",
@@ -217,7 +244,11 @@ pub fn convergence(
             round2(sb),
             round2(bt),
             round2(sbt),
-            if off { " (not −½)" } else { "" }
+            match (off, law) {
+                (false, _) => "",
+                (true, ErrorLaw::InverseSqrt) => " (not −½)",
+                (true, ErrorLaw::AtLeastInverseSqrt) => " (slower than −½)",
+            }
         ),
         _ => format!("{quantity}: too few runs for a slope"),
     };
@@ -339,7 +370,16 @@ mod tests {
                 stderr: 0.1 / f64::sqrt(t),
             })
             .collect();
-        let m = convergence(&runs, Some((1.0, 0.0)), "mtf50", "cy/px", "conv", 0.0).unwrap();
+        let m = convergence(
+            &runs,
+            Some((1.0, 0.0)),
+            "mtf50",
+            "cy/px",
+            "conv",
+            0.0,
+            ErrorLaw::InverseSqrt,
+        )
+        .unwrap();
         let get = |q: &str| m.figures.iter().find(|f| f.quantity == q).unwrap().value;
         assert!((get("mtf50/stderr_time_slope") + 0.5).abs() < 1e-12);
         assert!((get("mtf50/stderr_samples_slope") + 0.5).abs() < 1e-12);
@@ -353,12 +393,19 @@ mod tests {
     fn t_test_flags_only_a_slope_off_minus_half() {
         // −0.45 ± 0.02 from 5 runs: |0.05| < 3.182·0.02 = 0.064, not flagged;
         // −0.9 ± 0.05 from 4 runs: 0.4 > 4.303·0.05 = 0.215, flagged.
-        assert!(!slope_off(-0.45, 0.02, 5));
-        assert!(slope_off(-0.9, 0.05, 4));
+        let law = ErrorLaw::InverseSqrt;
+        assert!(!slope_off(-0.45, 0.02, 5, law));
+        assert!(slope_off(-0.9, 0.05, 4, law));
         // 3 runs: t = 12.706, so −0.9 ± 0.05 (0.4 < 0.635) is not flagged
-        assert!(!slope_off(-0.9, 0.05, 3));
-        assert!(slope_off(-0.5, 0.0, 4) && slope_off(-0.5, 0.1, 2));
+        assert!(!slope_off(-0.9, 0.05, 3, law));
+        assert!(slope_off(-0.5, 0.0, 4, law) && slope_off(-0.5, 0.1, 2, law));
         assert_eq!(t95(40), 1.96);
+        // Scrambled nets: only a slope significantly shallower than −½ is off.
+        let nets = ErrorLaw::AtLeastInverseSqrt;
+        assert!(!slope_off(-0.9, 0.05, 4, nets));
+        assert!(!slope_off(-0.45, 0.02, 5, nets));
+        assert!(slope_off(-0.2, 0.05, 4, nets)); // 0.3 > 4.303·0.05
+        assert!(slope_off(-0.9, 0.0, 4, nets) && slope_off(-0.9, 0.1, 2, nets));
     }
 
     #[test]

@@ -74,6 +74,7 @@
 use super::RenderSettings;
 use super::accel::BvhKind;
 use super::film::render_world;
+use super::sampler::SamplerKind;
 use super::world::World;
 use crate::optical_image::OpticalImage;
 use crate::optics::pinhole::Pinhole;
@@ -443,6 +444,10 @@ pub struct BenchOptions {
     pub reference_var: Option<PathBuf>,
     /// Write the timed render's CIE Y image here (PFM).
     pub y_out: Option<PathBuf>,
+    /// Independent sample batches of the timed render (`RenderSettings::batches`).
+    pub batches: u32,
+    /// The timed render's sampler.
+    pub sampler: SamplerKind,
 }
 
 impl Default for BenchOptions {
@@ -457,6 +462,8 @@ impl Default for BenchOptions {
             reference: None,
             reference_var: None,
             y_out: None,
+            batches: RenderSettings::default().batches,
+            sampler: SamplerKind::default(),
         }
     }
 }
@@ -481,6 +488,8 @@ pub fn run(o: &BenchOptions) -> Result<String> {
         max_bounces: 6,
         threads: o.threads,
         seed: o.seed,
+        batches: o.batches,
+        sampler: o.sampler,
         grid: crate::spectrum::WavelengthGrid {
             start_nm: 400.0,
             step_nm: if bands > 1 {
@@ -525,12 +534,14 @@ pub fn run(o: &BenchOptions) -> Result<String> {
     let isa = super::simd::RenderIsa::detect().name();
     out += &format!("render kernel: {isa}\n");
     let mut kv = format!(
-        "camsim-bench spp={} wall_s={:.4} cpu_s={:.4} paths_per_s={:.1} mean_y={:.6} render_isa={isa}",
+        "camsim-bench spp={} wall_s={:.4} cpu_s={:.4} paths_per_s={:.1} mean_y={:.6} render_isa={isa} batches={} sampler={}",
         o.spp,
         timed.render_s,
         cpu,
         paths / timed.render_s,
-        mean(&y)
+        mean(&y),
+        settings.batches.clamp(1, o.spp),
+        o.sampler.name()
     );
     if let Some(p) = &o.y_out {
         write_pfm(p, film.width_px as usize, film.height_px as usize, &y)?;

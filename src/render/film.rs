@@ -3,6 +3,7 @@
 
 use super::RenderSettings;
 use super::integrator::{Scratch, first_hit, trace};
+use super::sampler::{BatchScramble, Sampler, SamplerKind};
 use super::sampling::Rng;
 use super::simd::RenderIsa;
 use super::world::World;
@@ -38,33 +39,6 @@ fn camera_ray(
         return None;
     }
     Some((o.as_vec3(), d.as_vec3(), r.weight))
-}
-
-/// Stratify the film positions of one batch of `n` samples: cut the pixel
-/// into m×m cells (m = ⌈√n⌉) and give the samples `n` distinct cells, the
-/// first `n` entries of a random permutation (partial Fisher–Yates) keyed by
-/// (seed, pixel, batch). Each sample's cell is uniform over all cells and its
-/// position uniform inside it, so every sample is still uniform over the
-/// pixel (unbiased), no two share a cell (stratified), and batches draw
-/// independent permutations (their means stay independent for the standard
-/// error). Returns m; `cells[..n]` holds the cell indices (x = c % m, y = c / m).
-#[inline(always)]
-fn stratify(cells: &mut Vec<u32>, seed: u64, pixel: u64, batch: u64, n: usize) -> u32 {
-    let mut m = (n as f64).sqrt() as u32;
-    while (m as usize) * (m as usize) < n {
-        m += 1;
-    }
-    let total = m * m;
-    cells.clear();
-    cells.extend(0..total);
-    // A stream of its own: the per-sample streams are left as they were.
-    let mut rng = Rng::for_sample(seed ^ 0x5354_5241_5441_0000, pixel, batch);
-    for j in 0..n.min(total as usize) {
-        let left = total as u64 - j as u64;
-        let k = j + ((rng.next_u32() as u64 * left) >> 32) as usize;
-        cells.swap(j, k);
-    }
-    m
 }
 
 /// Render a window of the film. See `render` for the contract. The kernel
@@ -276,7 +250,6 @@ impl RowJob<'_> {
         let mut counts = vec![0u32; batches];
         let mut mean_px = vec![0.0f64; nb];
         let mut ss_px = vec![0.0f64; nb];
-        let mut cells: Vec<u32> = Vec::new();
         let mut nan = 0u64;
         for ix in 0..roi.w as usize {
             let px = roi.x + ix as u32;
@@ -299,22 +272,27 @@ impl RowJob<'_> {
                 // Samples of batch `bi` are si = bi, bi + batches, … (the same
                 // split and accumulation order as a plain round-robin loop).
                 let nk = (s.spp as usize - bi).div_ceil(batches);
-                let m = stratify(&mut cells, s.seed, pixel_id, bi as u64, nk);
-                for (j, &cell) in cells[..nk].iter().enumerate() {
+                let scramble = match s.sampler {
+                    SamplerKind::Sobol => Some(BatchScramble::new(pixel_key, bi as u64, nk)),
+                    SamplerKind::Independent => None,
+                };
+                for j in 0..nk {
                     let si = bi + j * batches;
                     counts[bi] += 1;
-                    let mut rng = Rng::for_pixel_sample(pixel_key, si as u64);
-                    let (ux, uy) = rng.uniform2();
-                    let (ua, ub) = rng.uniform2();
-                    // Jitter inside the sample's own cell of the m×m grid.
-                    let fx = ((cell % m) as f64 + ux as f64) / m as f64;
-                    let fy = ((cell / m) as f64 + uy as f64) / m as f64;
+                    // Sample j of batch bi: its film position, lens position
+                    // and every path draw are point j of the batch's
+                    // scrambled Sobol copies (sampler.rs), so the batch's
+                    // film positions are stratified over the pixel.
+                    let mut smp =
+                        Sampler::for_sample(scramble.as_ref(), pixel_key, j as u32, si as u64);
+                    let (fx, fy) = smp.get2d();
+                    let (ua, ub) = smp.get2d();
                     let film_m = DVec2::new(
-                        (px as f64 + fx - fw / 2.0) * pitch,
-                        (fh / 2.0 - (py as f64 + fy)) * pitch,
+                        (px as f64 + fx as f64 - fw / 2.0) * pitch,
+                        (fh / 2.0 - (py as f64 + fy as f64)) * pitch,
                     );
                     let (hero, lambda) = if dispersive_cam {
-                        let b = ((rng.uniform() * nb as f32) as usize).min(nb - 1);
+                        let b = ((smp.get1d() * nb as f32) as usize).min(nb - 1);
                         (Some(b), grid.wavelength(b))
                     } else {
                         (None, mid_nm)
@@ -340,7 +318,7 @@ impl RowJob<'_> {
                             sc.beta[nb..].fill(0.0);
                         }
                     }
-                    trace(world, o, d, s.max_bounces, hero, &mut rng, &mut sc);
+                    trace(world, o, d, s.max_bounces, hero, &mut smp, &mut sc);
                     if sc.l.iter().any(|x| !x.is_finite()) {
                         nan += 1;
                         continue;

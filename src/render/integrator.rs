@@ -11,7 +11,8 @@
 //! and only dispersive paths pay the colour noise.
 
 use super::geometry::offset_ray_origin;
-use super::sampling::{Frame, Rng, power_heuristic};
+use super::sampler::Sampler;
+use super::sampling::{Frame, power_heuristic};
 use super::world::{LightKind, World};
 use glam::Vec3;
 use wide::f32x4;
@@ -89,7 +90,7 @@ pub fn trace(
     mut d: Vec3,
     max_bounces: u32,
     mut hero: Option<usize>,
-    rng: &mut Rng,
+    smp: &mut Sampler,
     sc: &mut Scratch,
 ) {
     let nb = world.bands;
@@ -160,7 +161,9 @@ pub fn trace(
         let wo = frame.to_local(wo_w);
 
         if bsdf.is_dispersive() && hero.is_none() {
-            let b = ((rng.uniform() * nb as f32) as usize).min(nb - 1);
+            // From the sample's own stream: a draw taken by some samples
+            // only would shift the Sobol draws of the rest of the path.
+            let b = ((smp.get1d_independent() * nb as f32) as usize).min(nb - 1);
             for (j, x) in sc.beta.iter_mut().enumerate() {
                 *x = if j == b { *x * nb as f32 } else { 0.0 };
             }
@@ -171,9 +174,19 @@ pub fn trace(
         // shadow ray and a reflected continuation ray.
         let origin_front = offset_ray_origin(p, p_err, ng_s, ng_s);
 
+        // Every bounce takes the same draws in the same order (light choice,
+        // light position, lobe, direction, roulette) whether or not it uses
+        // them, so draw k of every sample of a batch samples the same
+        // dimension of the path (sampler.rs).
+        let u_light = smp.get1d();
+        let (u1, u2) = smp.get2d();
+        let u_lobe = smp.get1d();
+        let (v1, v2) = smp.get2d();
+        let u_rr = smp.get1d();
+
         // Next-event estimation.
         if !bsdf.is_delta() && wo.z > 0.0 {
-            let (u0, u1, u2) = (rng.uniform(), rng.uniform(), rng.uniform());
+            let u0 = u_light;
             if let Some(ls) = world.sample_light(p, u0, u1, u2) {
                 let wi = frame.to_local(ls.wi);
                 if wi.z > 0.0 && ls.wi.dot(ng_s) > 0.0 {
@@ -219,8 +232,7 @@ pub fn trace(
         }
 
         // BSDF sampling.
-        let (u0, u1, u2) = (rng.uniform(), rng.uniform(), rng.uniform());
-        let Some(bs) = bsdf.sample(wo, u0, u1, u2, hero, &mut sc.f) else {
+        let Some(bs) = bsdf.sample(wo, u_lobe, v1, v2, hero, &mut sc.f) else {
             break;
         };
         if !(bs.pdf > 0.0) || !bs.pdf.is_finite() {
@@ -256,7 +268,7 @@ pub fn trace(
         }
         if m < 1.0 && depth > 1 {
             let q = (1.0 - m).max(0.0);
-            if rng.uniform() < q {
+            if u_rr < q {
                 break;
             }
             let s = 1.0 / (1.0 - q);
@@ -269,6 +281,7 @@ pub fn trace(
 mod tests {
     use super::*;
     use crate::render::BvhKind;
+    use crate::render::sampling::Rng;
     use crate::render::world::selection_pmf;
     use crate::scene::shapes::quad;
     use crate::scene::{Light, Material, Scene};
@@ -345,8 +358,8 @@ mod tests {
         for i in 0..n {
             sc.beta[..nb].fill(1.0);
             sc.beta[nb..].fill(0.0);
-            let mut rng = Rng::for_sample(5, 0, i);
-            trace(&world, Vec3::Z, -Vec3::Z, 1, None, &mut rng, &mut sc);
+            let mut smp = Sampler::independent(Rng::for_sample(5, 0, i));
+            trace(&world, Vec3::Z, -Vec3::Z, 1, None, &mut smp, &mut sc);
             sum += sc.l[0] as f64;
         }
         let got = sum / n as f64;

@@ -8,12 +8,19 @@
 //!   irradiance (see `optics` conventions); geometry in metres.
 //! - Pixel estimate: box filter over the pixel area; `spp` samples split
 //!   round-robin into `batches` independent batches; the standard error is the
-//!   spread of the batch means, √(Σ(mₖ−m)²/(B(B−1))). Within a batch the film
-//!   positions are stratified (`film::stratify`: distinct cells of an m×m
-//!   grid, m = ⌈√n⌉, jittered), which cuts the noise of pixels that straddle
-//!   an edge or an emitter boundary; batches stay independent.
+//!   spread of the batch means, √(Σ(mₖ−m)²/(B(B−1))).
+//! - Sampler (`sampler.rs`, `RenderSettings::sampler`): by default each
+//!   batch's samples are the points of an Owen-scrambled 2-D Sobol net in
+//!   every draw of the camera and the first two bounces (film position, lens
+//!   position, light choice and position, lobe, direction, roulette), so they
+//!   are stratified over the pixel, the pupil, the light and the hemisphere;
+//!   every batch and pixel is scrambled independently, so each sample is still
+//!   uniform and the batch means stay independent. The stratification covers
+//!   `spp / batches` points: fewer batches give a less noisy image and a
+//!   coarser standard error. `independent` draws every number from PCG32.
 //! - Determinism: sample `s` of pixel `(x, y)` uses a PCG32 stream keyed by
-//!   `(seed, y·width + x, s)` and pixels are reduced in a fixed order, so any
+//!   `(seed, y·width + x, s)` and Sobol scrambles keyed by
+//!   `(seed, y·width + x, batch)`, and pixels are reduced in a fixed order, so any
 //!   thread count and any region of interest give bit-identical pixels.
 //! - Non-finite samples are dropped (counted in `nan_count`), never written.
 //! - Samples with pdf = 0 terminate the path (zero contribution).
@@ -69,6 +76,7 @@ pub mod film;
 pub mod geometry;
 pub mod integrator;
 pub mod output;
+pub mod sampler;
 pub mod sampling;
 pub mod simd;
 pub mod world;
@@ -81,6 +89,7 @@ use crate::spectrum::WavelengthGrid;
 use serde::{Deserialize, Serialize};
 
 pub use accel::BvhKind;
+pub use sampler::SamplerKind;
 pub use world::World;
 
 /// Render settings.
@@ -103,6 +112,10 @@ pub struct RenderSettings {
     /// e.g. a sensor's channel electron rates. Empty: none.
     #[serde(default)]
     pub stderr_weights: Vec<Vec<f32>>,
+    /// The random numbers of a sample (`sampler.rs`): Owen-scrambled Sobol
+    /// (default) or independent.
+    #[serde(default)]
+    pub sampler: SamplerKind,
 }
 
 impl Default for RenderSettings {
@@ -116,6 +129,7 @@ impl Default for RenderSettings {
             threads: 0,
             roi: None,
             stderr_weights: vec![],
+            sampler: SamplerKind::default(),
         }
     }
 }

@@ -33,6 +33,7 @@ fn settings(spp: u32, max_bounces: u32, seed: u64) -> RenderSettings {
         threads: 0,
         roi: None,
         stderr_weights: vec![],
+        sampler: Default::default(),
     }
 }
 
