@@ -16,7 +16,9 @@
 //! `max_abs_diff`; `√Σ(dᵢ·seᵢ)²/(n·rmse)` for the RMSE (delta method);
 //! `√Σseᵢ²/n` for the mean difference (points treated as independent, which
 //! RI annuli and MTF bins of one edge only approximately are); a crossing's
-//! as `se(y)/|dy/dx|` at the crossing.
+//! as half the distance between the crossings of the curve's ±1σ band (on a
+//! straight stretch the delta method se(y)/|dy/dx|; on a flat or noisy MTF
+//! the slope at the crossing would understate it many times over).
 //!
 //! The overlay is written as two curves named `<curve>#simulated` and
 //! `<curve>#reference`, which the report draws as series of one chart.
@@ -342,6 +344,21 @@ fn crossing(x: &[f64], y: &[f64], level: f64) -> Option<(f64, f64)> {
     })
 }
 
+/// Standard error of the first downward crossing of `level`: half
+/// the distance between the crossings of the curve's ±1σ band, y + se and
+/// y − se (a band edge that never crosses stands at the end of the span it
+/// would lie beyond). On a straight stretch this is se(y)/|dy/dx|, the delta
+/// method; where the curve is flat, or noise makes an earlier dip the first
+/// crossing, the slope at the crossing understates it by orders of magnitude
+/// (an MTF near 0.5 over a plateau), while the band's crossings see it.
+fn crossing_stderr(x: &[f64], y: &[f64], se: &[f64], level: f64) -> f64 {
+    let band = |sign: f64| -> Vec<f64> { y.iter().zip(se).map(|(v, e)| v + sign * e).collect() };
+    let (first, last) = (x[0], x[x.len() - 1]);
+    let upper = crossing(x, &band(1.0), level).map_or(last, |c| c.0);
+    let lower = crossing(x, &band(-1.0), level).map_or(first, |c| c.0);
+    (upper - lower).abs() / 2.0
+}
+
 /// Compare `sim` with the options' reference (see the module docs).
 pub fn compare_curve(
     sim: &Curve,
@@ -449,8 +466,7 @@ pub fn compare_curve(
                 "compare-curve '{measurement}': the reference never falls through {level}"
             ))
         })?;
-        let se_y = interp(&sx, &sse, s.0).unwrap_or(0.0);
-        let se_x = if s.1 != 0.0 { se_y / s.1.abs() } else { 0.0 };
+        let se_x = crossing_stderr(&sx, &sy, &sse, level);
         figures.push(Figure::new(
             measurement,
             format!("simulated_x@{level}"),
@@ -512,6 +528,25 @@ mod tests {
         }
     }
 
+    /// A curve that hovers just above the level over a plateau before it
+    /// falls: one standard error lower and it would cross at the plateau's
+    /// start, so the crossing is uncertain by about half the plateau, not by
+    /// se/|slope| at the final drop (0.03/0.31 ≈ 0.1).
+    #[test]
+    fn crossing_on_a_plateau_is_as_uncertain_as_the_plateau_is_long() {
+        let x: Vec<f64> = (0..6).map(f64::from).collect();
+        let y = [1.0, 0.52, 0.51, 0.52, 0.51, 0.2];
+        let se = [0.03; 6];
+        let c = crossing(&x, &y, 0.5).unwrap().0;
+        assert!((c - (4.0 + 0.01 / 0.31)).abs() < 1e-12);
+        // band crossings: y − 0.03 at 0 + 0.47/0.48, y + 0.03 at 4 + 0.04/0.31
+        let want = ((4.0 + 0.04 / 0.31) - 0.47 / 0.48) / 2.0;
+        assert!((crossing_stderr(&x, &y, &se, 0.5) - want).abs() < 1e-12);
+        // a band edge that never crosses stands at the span's end
+        let flat = [0.52; 6];
+        assert_eq!(crossing_stderr(&x, &flat, &se, 0.5), (5.0 - 0.0) / 2.0);
+    }
+
     #[test]
     fn differences_at_the_reference_points() {
         // simulated y = 1 − x/4 (exact at any x), reference y = 1 − x/5
@@ -537,7 +572,8 @@ mod tests {
         // crossings of 0.5: x = 2 (simulated), 2.5 (reference)
         assert!((get("simulated_x@0.5").value - 2.0).abs() < 1e-12);
         assert!((get("reference_x@0.5").value - 2.5).abs() < 1e-12);
-        // se of the crossing: se_y / |slope| = 0.01 / 0.25
+        // se of the crossing: se_y / |slope| = 0.01 / 0.25 on a straight line
+        // (the ±1σ band crosses 0.5 at x = 2 ± 0.04)
         assert!((get("simulated_x@0.5").stderr - 0.04).abs() < 1e-12);
         assert_eq!(m.curves[0].name, "c#simulated");
         assert_eq!(m.curves[1].name, "c#reference");
