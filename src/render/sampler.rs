@@ -80,17 +80,28 @@ impl SamplerKind {
 /// independent sampler.
 pub const LD_DRAWS: usize = 12;
 
+/// Lanes of the per-sample point arrays: `LD_DRAWS` rounded up to a vector
+/// width (16 f32/u32 = one AVX-512 register, two AVX2, four SSE).
+const LANES: usize = 16;
+const _: () = assert!(LD_DRAWS <= LANES);
+
 /// The scramble seeds one (pixel, batch) shares across its samples: every
 /// sample of the batch must see the same scrambled copy in a draw for the
 /// batch to be stratified. Built once per batch (`new`), so a sample's draws
-/// cost no hashing.
+/// cost no hashing. Stored draw-major per seed kind, so a sample computes
+/// all its scrambled draws at once, one draw per vector lane.
 pub struct BatchScramble {
-    /// Per draw: index shuffle, x scramble, y scramble.
-    seeds: [[u32; 3]; LD_DRAWS],
+    /// Per draw: index shuffle seed.
+    shuffle: [u32; LANES],
+    /// Per draw: x (dimension 0) and y (dimension 1) scramble seeds.
+    sx: [u32; LANES],
+    sy: [u32; LANES],
     /// Low bits of the shuffled index kept: enough for the batch's samples.
     /// Any aligned block of 2^m points of the sequence is a (0, m, 2)-net;
     /// a shorter index keeps the Sobol evaluation short.
     mask: u32,
+    /// m: the number of bits in `mask`.
+    bits: u32,
 }
 
 impl BatchScramble {
@@ -98,13 +109,13 @@ impl BatchScramble {
     /// `Rng::pixel_key(seed, pixel)`.
     pub fn new(pixel_key: u64, batch: u64, n: usize) -> Self {
         let key = mix64(pixel_key ^ mix64(batch ^ 0x536F_626F_6C00_0000));
-        let mut seeds = [[0u32; 3]; LD_DRAWS];
-        for (d, s) in seeds.iter_mut().enumerate() {
+        let (mut shuffle, mut sx, mut sy) = ([0u32; LANES], [0u32; LANES], [0u32; LANES]);
+        for d in 0..LD_DRAWS {
             let h = mix64(key ^ (d as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
             let h2 = mix64(h);
-            *s = [h as u32, (h >> 32) as u32, h2 as u32];
+            (shuffle[d], sx[d], sy[d]) = (h as u32, (h >> 32) as u32, h2 as u32);
         }
-        let bits = usize::BITS - n.saturating_sub(1).leading_zeros();
+        let bits = (usize::BITS - n.saturating_sub(1).leading_zeros()).min(32);
         let mask = if bits == 0 {
             0
         } else if bits >= 32 {
@@ -112,38 +123,80 @@ impl BatchScramble {
         } else {
             (1u32 << bits) - 1
         };
-        BatchScramble { seeds, mask }
+        BatchScramble {
+            shuffle,
+            sx,
+            sy,
+            mask,
+            bits,
+        }
+    }
+
+    /// Every scrambled draw of sample `index`: (x, y) of draw d in lane d.
+    /// Plain loops over the lanes, which the per-ISA row kernels vectorise;
+    /// integer arithmetic only, so every ISA level gives the same bits.
+    #[inline(always)]
+    fn points(&self, index: u32) -> ([f32; LANES], [f32; LANES]) {
+        let rk = index.reverse_bits();
+        // The Sobol index: Burley's shuffle, nus(k) = reverse(lk(reverse(k))).
+        let mut i = [0u32; LANES];
+        for (o, &s) in i.iter_mut().zip(&self.shuffle) {
+            *o = lk_permutation(rk, s).reverse_bits() & self.mask;
+        }
+        // x = nus(reverse(i)) = reverse(lk(i)): dimension 0 is the
+        // bit-reversed index, and the scramble's own reversals cancel.
+        let mut x = [0f32; LANES];
+        for ((o, &il), &s) in x.iter_mut().zip(&i).zip(&self.sx) {
+            *o = to_unit(lk_permutation(il, s).reverse_bits());
+        }
+        // y = nus(sobol1(i)) = reverse(lk(reverse(sobol1(i)))), reverse(sobol1)
+        // being the XOR of the bit-reversed columns selected by i's bits.
+        let mut yr = [0u32; LANES];
+        for (j, &w) in SOBOL1_REV_COLUMNS[..self.bits as usize].iter().enumerate() {
+            for (o, &il) in yr.iter_mut().zip(&i) {
+                *o ^= w & 0u32.wrapping_sub((il >> j) & 1);
+            }
+        }
+        let mut y = [0f32; LANES];
+        for ((o, &v), &s) in y.iter_mut().zip(&yr).zip(&self.sy) {
+            *o = to_unit(lk_permutation(v, s).reverse_bits());
+        }
+        (x, y)
     }
 }
 
 /// The numbers of one pixel sample.
-pub struct Sampler<'a> {
+pub struct Sampler {
     rng: Rng,
-    /// The batch's scrambles (`None`: independent sampler).
-    ld: Option<&'a BatchScramble>,
-    /// This sample's index in its batch, bit-reversed.
-    index_rev: u32,
+    /// Scrambled Sobol draws (draw d in lane d) of this sample.
+    x: [f32; LANES],
+    y: [f32; LANES],
     /// Next draw.
     draw: usize,
+    /// Draws taken from `x`, `y` (0: independent sampler).
+    ld_draws: usize,
 }
 
-impl<'a> Sampler<'a> {
+impl Sampler {
     /// Sample `index` of the batch scrambled by `ld` (`None`: every number
     /// from the PCG32 stream). `pixel_key` is `Rng::pixel_key(seed, pixel)`
     /// and `sample` the sample's number in the pixel: they key its PCG32
     /// stream.
     #[inline(always)]
-    pub fn for_sample(
-        ld: Option<&'a BatchScramble>,
-        pixel_key: u64,
-        index: u32,
-        sample: u64,
-    ) -> Self {
-        Sampler {
-            rng: Rng::for_pixel_sample(pixel_key, sample),
-            ld,
-            index_rev: index.reverse_bits(),
-            draw: 0,
+    pub fn for_sample(ld: Option<&BatchScramble>, pixel_key: u64, index: u32, sample: u64) -> Self {
+        let rng = Rng::for_pixel_sample(pixel_key, sample);
+        match ld {
+            Some(ld) => {
+                let (x, y) = ld.points(index);
+                Sampler {
+                    rng,
+                    x,
+                    y,
+                    draw: 0,
+                    ld_draws: LD_DRAWS,
+                }
+            }
+            None => Self::independent(rng),
         }
     }
 
@@ -152,23 +205,21 @@ impl<'a> Sampler<'a> {
     pub fn independent(rng: Rng) -> Self {
         Sampler {
             rng,
-            ld: None,
-            index_rev: 0,
+            x: [0.0; LANES],
+            y: [0.0; LANES],
             draw: 0,
+            ld_draws: 0,
         }
     }
 
     /// Uniform in [0, 1).
     #[inline(always)]
     pub fn get1d(&mut self) -> f32 {
-        match self.ld {
-            Some(ld) if self.draw < LD_DRAWS => {
-                let [s0, s1, _] = ld.seeds[self.draw];
-                self.draw += 1;
-                let i = shuffled_index(self.index_rev, s0, ld.mask);
-                to_unit(lk_permutation(i, s1).reverse_bits())
-            }
-            _ => self.rng.uniform(),
+        if self.draw < self.ld_draws {
+            self.draw += 1;
+            self.x[self.draw - 1]
+        } else {
+            self.rng.uniform()
         }
     }
 
@@ -182,28 +233,13 @@ impl<'a> Sampler<'a> {
     /// Two uniforms in [0, 1), stratified jointly across the batch.
     #[inline(always)]
     pub fn get2d(&mut self) -> (f32, f32) {
-        match self.ld {
-            Some(ld) if self.draw < LD_DRAWS => {
-                let [s0, s1, s2] = ld.seeds[self.draw];
-                self.draw += 1;
-                let i = shuffled_index(self.index_rev, s0, ld.mask);
-                // x = nus(reverse(i)) = reverse(lk(i)): dimension 0 is the
-                // bit-reversed index, and the scramble's own reversals cancel.
-                let x = lk_permutation(i, s1).reverse_bits();
-                let y = lk_permutation(sobol_dim1_reversed(i), s2).reverse_bits();
-                (to_unit(x), to_unit(y))
-            }
-            _ => self.rng.uniform2(),
+        if self.draw < self.ld_draws {
+            self.draw += 1;
+            (self.x[self.draw - 1], self.y[self.draw - 1])
+        } else {
+            self.rng.uniform2()
         }
     }
-}
-
-/// The Sobol index of a sample: its index in the batch, nested-uniform
-/// scrambled (Burley's shuffle), low bits kept. `index_rev` is the index
-/// bit-reversed: nus(i) = reverse(lk(reverse(i))).
-#[inline(always)]
-fn shuffled_index(index_rev: u32, seed: u32, mask: u32) -> u32 {
-    lk_permutation(index_rev, seed).reverse_bits() & mask
 }
 
 /// Bit-reversed Sobol dimension-1 columns: w₀ = 1, wⱼ = wⱼ₋₁ ⊕ (wⱼ₋₁ ≪ 1)
@@ -220,45 +256,6 @@ const fn sobol1_rev_columns() -> [u32; 32] {
 }
 
 const SOBOL1_REV_COLUMNS: [u32; 32] = sobol1_rev_columns();
-
-/// XOR of the columns selected by the 8 bits of a byte at position `shift`.
-const fn sobol1_rev_byte_table(shift: usize) -> [u32; 256] {
-    let mut t = [0u32; 256];
-    let mut b = 0;
-    while b < 256 {
-        let mut r = 0u32;
-        let mut j = 0;
-        while j < 8 {
-            if b & (1 << j) != 0 {
-                r ^= SOBOL1_REV_COLUMNS[shift + j];
-            }
-            j += 1;
-        }
-        t[b] = r;
-        b += 1;
-    }
-    t
-}
-
-const SOBOL1_REV_LO: [u32; 256] = sobol1_rev_byte_table(0);
-const SOBOL1_REV_HI: [u32; 256] = sobol1_rev_byte_table(8);
-
-/// reverse_bits(sobol_dim1(i)): the generator is linear over GF(2), so two
-/// byte tables cover indices below 2¹⁶ and a loop the rest.
-#[inline(always)]
-fn sobol_dim1_reversed(i: u32) -> u32 {
-    let mut r = SOBOL1_REV_LO[(i & 0xFF) as usize] ^ SOBOL1_REV_HI[((i >> 8) & 0xFF) as usize];
-    let mut rest = i >> 16;
-    let mut j = 16;
-    while rest != 0 {
-        if rest & 1 != 0 {
-            r ^= SOBOL1_REV_COLUMNS[j];
-        }
-        rest >>= 1;
-        j += 1;
-    }
-    r
-}
 
 /// The top 24 bits as a float in [0, 1) (exactly representable).
 #[inline(always)]
@@ -341,8 +338,8 @@ mod tests {
         }
     }
 
-    /// The renderer's fast form (index reversed once per sample, reversed
-    /// Sobol tables, cancelled reversals) gives exactly the textbook
+    /// The renderer's fast form (all draws at once, index reversed once per
+    /// sample, reversed Sobol columns, cancelled reversals) gives exactly the textbook
     /// composition nus(sobol(nus(i) mod 2^m)) of Burley's shuffled, scrambled
     /// Sobol, for short and long (> 2¹⁶, the loop) indices.
     #[test]
@@ -354,7 +351,7 @@ mod tests {
                 let index = r.next_u32() % n as u32;
                 let mut smp = Sampler::for_sample(Some(&scr), 1, index, 0);
                 for d in 0..LD_DRAWS {
-                    let [s0, s1, s2] = scr.seeds[d];
+                    let (s0, s1, s2) = (scr.shuffle[d], scr.sx[d], scr.sy[d]);
                     let i = nested_uniform_scramble(index, s0) & scr.mask;
                     let x = to_unit(nested_uniform_scramble(i.reverse_bits(), s1));
                     let y = to_unit(nested_uniform_scramble(sobol_dim1(i), s2));
