@@ -48,9 +48,11 @@
 //! matrix out instead (see `mitsuba_cornell_box`).
 //!
 //! ## Measured (`bench/mitsuba_compare.sh`, 2 threads)
-//! Current figures (idle machine, 4 seeds, 32 spp) are in `render/mod.rs`:
-//! camsim 1.35× Mitsuba's paths/s; equal-time RMSE 0.84 (all pixels) and
-//! 0.944 (light transport). Method notes from the first runs (load ≈ 6–7):
+//! Current figures per machine are in the README (*Performance by
+//! machine*). `--batches` and `--sampler` set the timed render's batches and
+//! sampler (the compare script uses one batch of the Sobol sampler, one
+//! image as Mitsuba renders it). Method notes from the first runs (load ≈
+//! 6–7, independent sampling):
 //! - Converged images agree: camsim 512 spp vs Mitsuba 1024 spp, mean Y
 //!   ratio 0.9999; 16×16-pixel block means differ by 0.47 % RMS (max 1.6 %),
 //!   which is their Monte Carlo noise; no systematic per-pixel difference.

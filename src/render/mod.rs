@@ -41,29 +41,19 @@
 //!   it), with the same bits at every level.
 //! - Light selection: proportional to power, each emitting light at least
 //!   10⁻³/N (`world::selection_pmf`).
-//! - Performance (`bench/mitsuba_compare.sh`: Mitsuba `cornell_box()`, 256²,
+//! - Performance: `bench/mitsuba_compare.sh` (Mitsuba `cornell_box()`, 256²,
 //!   max_depth 7 = max_bounces 6, 2 threads, CIE Y against one converged
-//!   Mitsuba reference, box filter, 4 seeds; 2026-11-23, idle 2-core machine):
-//!   camsim (31 bands, 4-wide BVH, stratified film positions) 1.250 M paths/s
-//!   wall, 0.636 M per CPU-s; Mitsuba 3.9.1 `llvm_ad_spectral` (4 wavelengths,
-//!   default independent sampler) 0.928 M paths/s, 0.466 M per CPU-s → ratio
-//!   1.35 (wall) / 1.37 (CPU). Equal-time relative RMSE camsim/Mitsuba: all
-//!   pixels 0.844 ± 0.047 (0.804 at equal CPU time); light transport only
-//!   (emitter edge ±2 px excluded) 0.944 ± 0.003 (0.926 at equal CPU time).
-//!   Converged images agree (mean Y ratio 0.9998, 16×16 blocks 0.46 % RMS).
-//!   Session 3 cut the instructions per path by 13 % (callgrind; the first
-//!   six changes leave the images bit for bit unchanged): precomputed triangle
-//!   normals, BVH4 traversal that goes straight into the nearest child, a box
-//!   test without per-ray indexing, band vectors padded to a multiple of 8, a
-//!   vectorised roulette maximum, band-vectorised per-pixel standard error, and
-//!   a series sin/cos in the concentric disk map (before: 1.048 M paths/s,
-//!   1.14×; light transport 1.014).
-//!   Mitsuba's LLVM `render()` returns before its kernels run (17 ms for a
-//!   12 s render): timing it without synchronising gave the 3–9 M paths/s
-//!   quoted earlier — an artefact. camsim's Russian roulette (from the 2nd
-//!   bounce, survival = max-band throughput, as pbrt-v4) is noisier per
-//!   sample than Mitsuba's (from depth 5) but as efficient per unit time
-//!   (measured 1/(RMSE²·t) for roulette start 2…5: 5.21, 5.21, 5.04, 5.01).
+//!   Mitsuba reference, box filter, 4 seeds). The figures per machine and
+//!   their history are in the README (*Performance by machine*); on the
+//!   2-core AVX-512 EPYC (2026-11-27) camsim runs 0.76–0.82× Mitsuba's
+//!   paths/s (31 bands per path against 4 wavelengths), and with the Sobol
+//!   sampler in one batch its equal-time RMSE is 0.56–0.58 of Mitsuba's over
+//!   all pixels and 0.98–1.00 for light transport (emitter edge excluded).
+//!   Converged images agree (mean Y ratio 0.9999, 16×16 blocks 0.40 % RMS).
+//!   Mitsuba's LLVM `render()` returns before its kernels run: time it to
+//!   completion. Russian roulette from the 2nd bounce (pbrt-v4) is as
+//!   efficient per unit time as from the 3rd…5th (measured with both
+//!   samplers).
 
 // `!(x > 0.0)` is deliberate throughout: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
