@@ -37,7 +37,7 @@ pub struct ConversionGainOptions {
     pub mean_dv: f64,
     pub frames: usize,
     pub exposure_s: f64,
-    /// Crop, full-frame sensor pixels; None = `default_roi` (the central crop).
+    /// Crop, full-frame sensor pixels; None = the centred 20×10 window ([`window`]).
     pub roi_px: Option<Rect>,
     pub channel: String,
     /// PRNU of Eq. 12 as a fraction; None = the sensor's.
