@@ -58,24 +58,20 @@ fn assert_minus_half(rows: &[ResultRow], m: &str, q: &str, runs: usize) {
     get(rows, m, &format!("{q}/stderr_time_slope"));
 }
 
-/// Unbiased figures: the MCC patch means of the KDL Cornell box through a
-/// noise-free sensor, rendered with independent samples (pure Monte Carlo
-/// noise; 72 patch channels, each stderr from ~12–25 pixels), and the
-/// conversion gain α from simulated flat frames (its runs count frames, not
-/// samples).
-///
-/// Each patch's slope has its own noisy standard error, so the test is on the
-/// set: the mean of the 72 slopes is −½ within 3 standard errors of that mean
-/// (their scatter / √72), and the t-test flags about 5 % of them by chance —
-/// at most 10 of 72 (binomial mean 3.6, sd 1.85: 10 is 3.5 sd above).
-#[test]
-fn unbiased_figures_fall_as_inverse_sqrt_samples() {
-    let tmp = tempfile::tempdir().unwrap();
+/// The MCC patch means of the KDL Cornell box through a noise-free sensor,
+/// followed at 4, 8, 16 and 32 spp with `sampler`: the mean and standard
+/// error of the 72 patch-channel slopes, how many are flagged, the rows and
+/// the results directory.
+fn mcc_patch_slopes(
+    d: &Path,
+    name: &str,
+    sampler: &str,
+) -> (f64, f64, usize, Vec<ResultRow>, PathBuf) {
     let dir = run(
-        tmp.path(),
-        "conv-unbiased",
+        d,
+        name,
         &format!(
-            "    scene \"{}\"\n    add \"mcc\" target=\"mcc\"\n    sensor \"{}\" exposure-s=0.5 photon-noise=#false read-noise=#false dark-current=#false dsnu=#false prnu=#false column-fpn=#false quantization=#false\n    render spp=4 max-bounces=2 seed=5 sampler=\"independent\"\n    measure \"mcc\" of=\"mcc\"\n    measure \"convergence\" name=\"conv-mcc\" of=\"mcc\" spp=(4 8 16 32) quantity=\"_mean\"\n",
+            "    scene \"{}\"\n    add \"mcc\" target=\"mcc\"\n    sensor \"{}\" exposure-s=0.5 photon-noise=#false read-noise=#false dark-current=#false dsnu=#false prnu=#false column-fpn=#false quantization=#false\n    render spp=4 max-bounces=2 seed=5 sampler=\"{sampler}\"\n    measure \"mcc\" of=\"mcc\"\n    measure \"convergence\" name=\"conv-mcc\" of=\"mcc\" spp=(4 8 16 32) quantity=\"_mean\"\n",
             root().join("scenes/cornell-box.kdl").display(),
             root().join("sensors/generic.kdl").display(),
         ),
@@ -92,11 +88,24 @@ fn unbiased_figures_fall_as_inverse_sqrt_samples() {
     let n = slopes.len() as f64;
     let m = slopes.iter().sum::<f64>() / n;
     let sd = (slopes.iter().map(|b| (b - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
-    assert!(
-        (m + 0.5).abs() < 3.0 * sd / n.sqrt(),
-        "mean slope {m} ± {}",
-        sd / n.sqrt()
-    );
+    (m, sd / n.sqrt(), flagged, rows, dir)
+}
+
+/// Unbiased figures: the MCC patch means of the KDL Cornell box through a
+/// noise-free sensor, rendered with independent samples (pure Monte Carlo
+/// noise; 72 patch channels, each stderr from ~12–25 pixels), and the
+/// conversion gain α from simulated flat frames (its runs count frames, not
+/// samples).
+///
+/// Each patch's slope has its own noisy standard error, so the test is on the
+/// set: the mean of the 72 slopes is −½ within 3 standard errors of that mean
+/// (their scatter / √72), and the t-test flags about 5 % of them by chance —
+/// at most 10 of 72 (binomial mean 3.6, sd 1.85: 10 is 3.5 sd above).
+#[test]
+fn unbiased_figures_fall_as_inverse_sqrt_samples() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (m, se, flagged, rows, dir) = mcc_patch_slopes(tmp.path(), "conv-unbiased", "independent");
+    assert!((m + 0.5).abs() < 3.0 * se, "mean slope {m} ± {se}");
     assert!(flagged <= 10, "{flagged} of 72 flagged");
     assert!(
         !rows.iter().any(|r| r.quantity.contains("clipped")),
@@ -138,32 +147,8 @@ fn unbiased_figures_fall_as_inverse_sqrt_samples() {
 #[test]
 fn sobol_figures_fall_at_least_as_fast_as_inverse_sqrt() {
     let tmp = tempfile::tempdir().unwrap();
-    let dir = run(
-        tmp.path(),
-        "conv-sobol",
-        &format!(
-            "    scene \"{}\"\n    add \"mcc\" target=\"mcc\"\n    sensor \"{}\" exposure-s=0.5 photon-noise=#false read-noise=#false dark-current=#false dsnu=#false prnu=#false column-fpn=#false quantization=#false\n    render spp=4 max-bounces=2 seed=5\n    measure \"mcc\" of=\"mcc\"\n    measure \"convergence\" name=\"conv-mcc\" of=\"mcc\" spp=(4 8 16 32) quantity=\"_mean\"\n",
-            root().join("scenes/cornell-box.kdl").display(),
-            root().join("sensors/generic.kdl").display(),
-        ),
-    );
-    let rows = read_results(&dir.join("results.csv")).unwrap();
-    let (mut slopes, mut flagged) = (vec![], 0);
-    for p in 1..=24 {
-        for c in ["r", "g", "b"] {
-            let q = format!("patch{p:02}/{c}_mean");
-            slopes.push(get(&rows, "conv-mcc", &format!("{q}/stderr_samples_slope")).0);
-            flagged += get(&rows, "conv-mcc", &format!("{q}/slope_off_minus_half")).0 as usize;
-        }
-    }
-    let n = slopes.len() as f64;
-    let m = slopes.iter().sum::<f64>() / n;
-    let sd = (slopes.iter().map(|b| (b - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
-    assert!(
-        m + 0.5 < -3.0 * sd / n.sqrt(),
-        "mean slope {m} ± {}",
-        sd / n.sqrt()
-    );
+    let (m, se, flagged, _, _) = mcc_patch_slopes(tmp.path(), "conv-sobol", "sobol");
+    assert!(m + 0.5 < -3.0 * se, "mean slope {m} ± {se}");
     assert_eq!(flagged, 0, "{flagged} of 72 flagged");
 }
 
