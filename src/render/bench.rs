@@ -73,10 +73,10 @@
 //!   the green wall (block RMSE 19 % vs 14 %), where β after the green bounce
 //!   is ≤ 0.5 and early roulette kills most indirect paths.
 
-use super::RenderSettings;
 use super::accel::BvhKind;
 use super::film::render_world;
 use super::sampler::SamplerKind;
+use super::settings::RenderSettings;
 use super::world::World;
 use crate::optical_image::OpticalImage;
 use crate::optics::pinhole::Pinhole;

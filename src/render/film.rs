@@ -1,10 +1,10 @@
 //! The film: pixel sampling, camera weights, batch statistics, labels and
 //! depth, parallel over image rows with per-pixel seeding.
 
-use super::RenderSettings;
 use super::integrator::{Scratch, first_hit, trace};
 use super::sampler::{BatchScramble, Sampler, SamplerKind};
 use super::sampling::Rng;
+use super::settings::RenderSettings;
 use super::simd::RenderIsa;
 use super::world::World;
 use crate::optical_image::{OpticalImage, Rect};
