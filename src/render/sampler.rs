@@ -4,12 +4,14 @@
 //! - `Independent`: every number from the sample's own PCG32 stream
 //!   (`sampling::Rng`), keyed by (seed, pixel, sample).
 //! - `Sobol` (the default): randomised quasi-Monte Carlo. The `n` samples of
-//!   one batch are the first `n` points of a 2-D Sobol sequence (its first two
-//!   dimensions, a (0,2)-sequence in base 2), and each 2-D draw of a path (film
+//!   one batch take `n` of the first 2^m ≥ n points of a 2-D Sobol sequence
+//!   (its first two dimensions, a (0,2)-sequence in base 2; all of them, a
+//!   (0,m,2)-net, when n is a power of two), and each 2-D draw of a path (film
 //!   position, lens position, light position, BSDF direction, …) takes its
 //!   own copy of that sequence, randomised independently. 1-D draws (light
-//!   choice, lobe choice, roulette, hero band) are the first coordinate of a
-//!   copy of their own. This is "padding" as in pbrt's `PaddedSobolSampler`;
+//!   choice, lobe choice, roulette, a dispersive camera's band) are the first
+//!   coordinate of a copy of their own; a band chosen inside the scene (a
+//!   dispersive dielectric, met by some samples only) comes from PCG32. This is "padding" as in pbrt's `PaddedSobolSampler`;
 //!   the randomisation is Owen's nested uniform scrambling, in the hash-based
 //!   form of Burley (2020, "Practical Hash-based Owen Scrambling", JCGT 9(4)):
 //!   - the point index is shuffled by a nested uniform scramble of its bits
@@ -21,10 +23,12 @@
 //! uniform scramble each point is uniform on [0,1)², so every sample is still
 //! a uniform draw; the copies of one sample are independent, and every batch
 //! (and every pixel) takes its own scramble seeds, so the batch means stay
-//! independent and their spread remains an honest standard error (Owen 1997:
-//! scrambled nets are an unbiased RQMC estimator whose variance is never more
-//! than e ≈ 2.718 times plain Monte Carlo's and is o(1/n) for square-integrable
-//! integrands). What it buys: the `n` points of a batch are stratified in every
+//! independent and their spread remains an honest standard error. For one
+//! 2-D draw on its own, Owen (1997) bounds a scrambled (0,m,2)-net's variance
+//! by e ≈ 2.718 times plain Monte Carlo's and shows it is o(1/n) for any
+//! square-integrable integrand; the padded copies make no such promise for
+//! the path as a whole, which is why the gain is measured (README), not
+//! assumed. What it buys: the `n` points of a batch are stratified in every
 //! elementary interval at once (2×2, 4×1, 1×4 cells for n = 4; 8×4, 4×8, … for
 //! 32), so soft shadows, emitter edges and the first indirect bounce converge
 //! faster than n^(−1/2). The gain grows with the samples per batch: a render
