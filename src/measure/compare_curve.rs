@@ -333,13 +333,12 @@ fn interp(x: &[f64], y: &[f64], t: f64) -> Option<f64> {
     Some(y[i - 1] + w * (y[i] - y[i - 1]))
 }
 
-/// First downward crossing of `level`: (x, slope dy/dx there).
-fn crossing(x: &[f64], y: &[f64], level: f64) -> Option<(f64, f64)> {
+/// First downward crossing of `level`: its x.
+fn crossing(x: &[f64], y: &[f64], level: f64) -> Option<f64> {
     (1..x.len()).find_map(|i| {
         (y[i - 1] >= level && y[i] < level).then(|| {
             let w = (y[i - 1] - level) / (y[i - 1] - y[i]);
-            let slope = (y[i] - y[i - 1]) / (x[i] - x[i - 1]);
-            (x[i - 1] + w * (x[i] - x[i - 1]), slope)
+            x[i - 1] + w * (x[i] - x[i - 1])
         })
     })
 }
@@ -354,8 +353,8 @@ fn crossing(x: &[f64], y: &[f64], level: f64) -> Option<(f64, f64)> {
 fn crossing_stderr(x: &[f64], y: &[f64], se: &[f64], level: f64) -> f64 {
     let band = |sign: f64| -> Vec<f64> { y.iter().zip(se).map(|(v, e)| v + sign * e).collect() };
     let (first, last) = (x[0], x[x.len() - 1]);
-    let upper = crossing(x, &band(1.0), level).map_or(last, |c| c.0);
-    let lower = crossing(x, &band(-1.0), level).map_or(first, |c| c.0);
+    let upper = crossing(x, &band(1.0), level).unwrap_or(last);
+    let lower = crossing(x, &band(-1.0), level).unwrap_or(first);
     (upper - lower).abs() / 2.0
 }
 
@@ -471,21 +470,21 @@ pub fn compare_curve(
             measurement,
             format!("simulated_x@{level}"),
             &sim.x_unit,
-            s.0,
+            s,
             se_x,
         ));
         figures.push(Figure::new(
             measurement,
             format!("reference_x@{level}"),
             &sim.x_unit,
-            r.0,
+            r,
             0.0,
         ));
         figures.push(Figure::new(
             measurement,
             format!("diff_x@{level}"),
             &sim.x_unit,
-            s.0 - r.0,
+            s - r,
             se_x,
         ));
     }
@@ -537,7 +536,7 @@ mod tests {
         let x: Vec<f64> = (0..6).map(f64::from).collect();
         let y = [1.0, 0.52, 0.51, 0.52, 0.51, 0.2];
         let se = [0.03; 6];
-        let c = crossing(&x, &y, 0.5).unwrap().0;
+        let c = crossing(&x, &y, 0.5).unwrap();
         assert!((c - (4.0 + 0.01 / 0.31)).abs() < 1e-12);
         // band crossings: y − 0.03 at 0 + 0.47/0.48, y + 0.03 at 4 + 0.04/0.31
         let want = ((4.0 + 0.04 / 0.31) - 0.47 / 0.48) / 2.0;
