@@ -72,7 +72,7 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = camsim::render::RenderSettings::default().batches)]
     pub batches: u32,
     /// render: the timed render's sampler: sobol (the renderer's default) or independent.
-    #[arg(long, default_value = "sobol")]
+    #[arg(long, default_value = camsim::render::SamplerKind::default().name())]
     pub sampler: String,
 }
 
@@ -245,8 +245,9 @@ pub fn bench(a: BenchArgs) -> Result<i32> {
             };
             let sampler = camsim::render::SamplerKind::parse(&a.sampler).ok_or_else(|| {
                 Error::invalid(format!(
-                    "--sampler '{}': expected sobol or independent",
-                    a.sampler
+                    "--sampler '{}': expected {}",
+                    a.sampler,
+                    camsim::render::SamplerKind::NAMES.join(" or ")
                 ))
             })?;
             let r = camsim::render::bench::run(&camsim::render::bench::BenchOptions {

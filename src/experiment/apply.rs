@@ -333,8 +333,10 @@ pub fn apply(
             "sampler" => {
                 let name = as_str(v, "sampler")?;
                 spec.render.sampler = crate::render::SamplerKind::parse(name).ok_or_else(|| {
+                    let names = crate::render::SamplerKind::NAMES.map(|n| format!("\"{n}\""));
                     ApplyError::new(format!(
-                        "'sampler': expected \"sobol\" or \"independent\", found \"{name}\""
+                        "'sampler': expected {}, found \"{name}\"",
+                        names.join(" or ")
                     ))
                 })?
             }

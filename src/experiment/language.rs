@@ -75,7 +75,7 @@ pub static RENDER_SCHEMA: Schema = Schema {
         ),
         ParamSpec::new(
             "sampler",
-            Kind::Choice(&["sobol", "independent"]),
+            Kind::Choice(&crate::render::SamplerKind::NAMES),
             "sobol",
             "the renderer's random numbers: \"sobol\" stratifies each batch's samples over the pixel, pupil, light and first two bounces (Owen-scrambled Sobol; error falls at least as fast as N^(−½), often faster), \"independent\" draws them independently (error ∝ N^(−½) exactly)",
             "\"independent\"",

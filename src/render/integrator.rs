@@ -185,47 +185,44 @@ pub fn trace(
         let u_rr = smp.get1d();
 
         // Next-event estimation.
-        if !bsdf.is_delta() && wo.z > 0.0 {
-            let u0 = u_light;
-            if let Some(ls) = world.sample_light(p, u0, u1, u2) {
-                let wi = frame.to_local(ls.wi);
-                if wi.z > 0.0 && ls.wi.dot(ng_s) > 0.0 {
-                    // The BSDF is evaluated only for unoccluded samples (below):
-                    // it draws no random numbers, so the result is unchanged.
-                    let origin = origin_front;
-                    let visible = match ls.target {
-                        Some((pl, err_l, nl)) => {
-                            let tgt = if nl == Vec3::ZERO {
-                                pl
-                            } else {
-                                offset_ray_origin(pl, err_l, nl, -ls.wi)
-                            };
-                            // Unit direction: obvhs' slab test clamps tiny inverse components,
-                            // which would misbehave for short unnormalised vectors (mm scenes).
-                            let dv = tgt - origin;
-                            let len = dv.length();
-                            len > 0.0
-                                && world.accel.unoccluded(
-                                    origin,
-                                    dv / len,
-                                    len * (1.0 - SHADOW_EPS),
-                                )
-                        }
-                        None => world.accel.unoccluded(origin, ls.wi, f32::INFINITY),
-                    };
-                    if visible {
-                        let pdf_b = bsdf.eval(wo, wi, &mut sc.f);
-                        let w = if ls.delta {
-                            1.0
+        if !bsdf.is_delta()
+            && wo.z > 0.0
+            && let Some(ls) = world.sample_light(p, u_light, u1, u2)
+        {
+            let wi = frame.to_local(ls.wi);
+            if wi.z > 0.0 && ls.wi.dot(ng_s) > 0.0 {
+                // The BSDF is evaluated only for unoccluded samples (below):
+                // it draws no random numbers, so the result is unchanged.
+                let origin = origin_front;
+                let visible = match ls.target {
+                    Some((pl, err_l, nl)) => {
+                        let tgt = if nl == Vec3::ZERO {
+                            pl
                         } else {
-                            power_heuristic(ls.pdf, pdf_b)
+                            offset_ray_origin(pl, err_l, nl, -ls.wi)
                         };
-                        let s = wi.z * w * ls.scale / ls.pdf;
-                        for (((o, &b), &f), &e) in
-                            sc.l.iter_mut().zip(&sc.beta).zip(&sc.f).zip(ls.spec)
-                        {
-                            *o += b * f * e * s;
-                        }
+                        // Unit direction: obvhs' slab test clamps tiny inverse components,
+                        // which would misbehave for short unnormalised vectors (mm scenes).
+                        let dv = tgt - origin;
+                        let len = dv.length();
+                        len > 0.0
+                            && world
+                                .accel
+                                .unoccluded(origin, dv / len, len * (1.0 - SHADOW_EPS))
+                    }
+                    None => world.accel.unoccluded(origin, ls.wi, f32::INFINITY),
+                };
+                if visible {
+                    let pdf_b = bsdf.eval(wo, wi, &mut sc.f);
+                    let w = if ls.delta {
+                        1.0
+                    } else {
+                        power_heuristic(ls.pdf, pdf_b)
+                    };
+                    let s = wi.z * w * ls.scale / ls.pdf;
+                    for (((o, &b), &f), &e) in sc.l.iter_mut().zip(&sc.beta).zip(&sc.f).zip(ls.spec)
+                    {
+                        *o += b * f * e * s;
                     }
                 }
             }

@@ -42,7 +42,7 @@
 //! PCG32 stream: deep bounces carry little of the image and gain little from
 //! stratification, while each scrambled draw costs three hash permutations.
 
-use super::sampling::{Rng, mix64};
+use super::sampling::{Rng, mix64, unit_f32 as to_unit};
 use serde::{Deserialize, Serialize};
 
 /// Which random numbers the renderer uses (`RenderSettings::sampler`).
@@ -57,19 +57,20 @@ pub enum SamplerKind {
 }
 
 impl SamplerKind {
-    pub fn name(self) -> &'static str {
+    /// Every kind, the default first.
+    pub const ALL: [SamplerKind; 2] = [SamplerKind::Sobol, SamplerKind::Independent];
+    /// Their names, in the order of `ALL` (the KDL choice and `--sampler`).
+    pub const NAMES: [&'static str; 2] = [Self::ALL[0].name(), Self::ALL[1].name()];
+
+    pub const fn name(self) -> &'static str {
         match self {
             SamplerKind::Independent => "independent",
             SamplerKind::Sobol => "sobol",
         }
     }
-    /// Parse `independent` or `sobol`.
+    /// The kind named `s` (one of `NAMES`).
     pub fn parse(s: &str) -> Option<Self> {
-        match s {
-            "independent" => Some(SamplerKind::Independent),
-            "sobol" => Some(SamplerKind::Sobol),
-            _ => None,
-        }
+        Self::ALL.into_iter().find(|k| k.name() == s)
     }
 }
 
@@ -100,11 +101,9 @@ pub struct BatchScramble {
     /// Per draw: x (dimension 0) and y (dimension 1) scramble seeds.
     sx: [u32; LANES],
     sy: [u32; LANES],
-    /// Low bits of the shuffled index kept: enough for the batch's samples.
-    /// Any aligned block of 2^m points of the sequence is a (0, m, 2)-net;
-    /// a shorter index keeps the Sobol evaluation short.
-    mask: u32,
-    /// m: the number of bits in `mask`.
+    /// m: the low bits of the shuffled index kept, enough for the batch's
+    /// samples. Any aligned block of 2^m points of the sequence is a
+    /// (0, m, 2)-net; a shorter index keeps the Sobol evaluation short.
     bits: u32,
 }
 
@@ -120,20 +119,18 @@ impl BatchScramble {
             (shuffle[d], sx[d], sy[d]) = (h as u32, (h >> 32) as u32, h2 as u32);
         }
         let bits = (usize::BITS - n.saturating_sub(1).leading_zeros()).min(32);
-        let mask = if bits == 0 {
-            0
-        } else if bits >= 32 {
-            u32::MAX
-        } else {
-            (1u32 << bits) - 1
-        };
         BatchScramble {
             shuffle,
             sx,
             sy,
-            mask,
             bits,
         }
+    }
+
+    /// The low `bits` bits set.
+    #[inline(always)]
+    fn mask(&self) -> u32 {
+        u32::MAX.checked_shr(32 - self.bits).unwrap_or(0)
     }
 
     /// Every scrambled draw of sample `index`: (x, y) of draw d in lane d.
@@ -141,11 +138,11 @@ impl BatchScramble {
     /// integer arithmetic only, so every ISA level gives the same bits.
     #[inline(always)]
     fn points(&self, index: u32) -> ([f32; LANES], [f32; LANES]) {
-        let rk = index.reverse_bits();
+        let (rk, mask) = (index.reverse_bits(), self.mask());
         // The Sobol index: Burley's shuffle, nus(k) = reverse(lk(reverse(k))).
         let mut i = [0u32; LANES];
         for (o, &s) in i.iter_mut().zip(&self.shuffle) {
-            *o = lk_permutation(rk, s).reverse_bits() & self.mask;
+            *o = lk_permutation(rk, s).reverse_bits() & mask;
         }
         // x = nus(reverse(i)) = reverse(lk(i)): dimension 0 is the
         // bit-reversed index, and the scramble's own reversals cancel.
@@ -261,29 +258,6 @@ const fn sobol1_rev_columns() -> [u32; 32] {
 
 const SOBOL1_REV_COLUMNS: [u32; 32] = sobol1_rev_columns();
 
-/// The top 24 bits as a float in [0, 1) (exactly representable).
-#[inline(always)]
-fn to_unit(x: u32) -> f32 {
-    (x >> 8) as f32 * (1.0 / 16_777_216.0)
-}
-
-/// Second dimension of the Sobol sequence (the first is the bit-reversed
-/// index, van der Corput): generator matrix = Pascal's triangle mod 2, whose
-/// column j is built from the previous one by v ^= v >> 1.
-#[inline(always)]
-pub fn sobol_dim1(mut i: u32) -> u32 {
-    let mut v = 1u32 << 31;
-    let mut r = 0u32;
-    while i != 0 {
-        if i & 1 != 0 {
-            r ^= v;
-        }
-        i >>= 1;
-        v ^= v >> 1;
-    }
-    r
-}
-
 /// Laine–Karras style hash permutation: every output bit depends only on the
 /// input bits below it (the multiplications carry upwards only), which is
 /// what makes it a nested uniform (Owen) scramble when applied to the
@@ -298,16 +272,35 @@ fn lk_permutation(mut x: u32, seed: u32) -> u32 {
     x
 }
 
-/// Owen's nested uniform scramble of a 32-bit fixed-point value: bit k is
-/// flipped by a hash of the bits above it (Burley 2020).
-#[inline(always)]
-pub fn nested_uniform_scramble(x: u32, seed: u32) -> u32 {
-    lk_permutation(x.reverse_bits(), seed).reverse_bits()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    // The textbook forms the renderer's fast form is checked against.
+
+    /// Second dimension of the Sobol sequence (the first is the bit-reversed
+    /// index, van der Corput): generator matrix = Pascal's triangle mod 2, whose
+    /// column j is built from the previous one by v ^= v >> 1.
+    #[inline(always)]
+    fn sobol_dim1(mut i: u32) -> u32 {
+        let mut v = 1u32 << 31;
+        let mut r = 0u32;
+        while i != 0 {
+            if i & 1 != 0 {
+                r ^= v;
+            }
+            i >>= 1;
+            v ^= v >> 1;
+        }
+        r
+    }
+
+    /// Owen's nested uniform scramble of a 32-bit fixed-point value: bit k is
+    /// flipped by a hash of the bits above it (Burley 2020).
+    #[inline(always)]
+    fn nested_uniform_scramble(x: u32, seed: u32) -> u32 {
+        lk_permutation(x.reverse_bits(), seed).reverse_bits()
+    }
 
     /// The first 2^m points of dimensions (0, 1) form a (0, m, 2)-net: every
     /// elementary interval of area 2^−m (2^a × 2^(m−a) cells) holds exactly one
@@ -356,7 +349,7 @@ mod tests {
                 let mut smp = Sampler::for_sample(Some(&scr), 1, index, 0);
                 for d in 0..LD_DRAWS {
                     let (s0, s1, s2) = (scr.shuffle[d], scr.sx[d], scr.sy[d]);
-                    let i = nested_uniform_scramble(index, s0) & scr.mask;
+                    let i = nested_uniform_scramble(index, s0) & scr.mask();
                     let x = to_unit(nested_uniform_scramble(i.reverse_bits(), s1));
                     let y = to_unit(nested_uniform_scramble(sobol_dim1(i), s2));
                     if d % 3 == 2 {

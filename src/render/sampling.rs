@@ -16,6 +16,12 @@ pub fn mix64(mut z: u64) -> u64 {
     z ^ (z >> 31)
 }
 
+/// The top 24 bits of `x` as a float in [0, 1) (exactly representable).
+#[inline(always)]
+pub fn unit_f32(x: u32) -> f32 {
+    (x >> 8) as f32 * (1.0 / 16_777_216.0)
+}
+
 /// PCG32 (XSH-RR) generator.
 #[derive(Clone, Debug)]
 pub struct Rng {
@@ -63,7 +69,7 @@ impl Rng {
     /// Uniform in [0, 1).
     #[inline(always)]
     pub fn uniform(&mut self) -> f32 {
-        (self.next_u32() >> 8) as f32 * (1.0 / 16_777_216.0)
+        unit_f32(self.next_u32())
     }
     #[inline(always)]
     pub fn uniform2(&mut self) -> (f32, f32) {
