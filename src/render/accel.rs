@@ -3,6 +3,7 @@
 //! notes) and the closest-hit query the integrator asks of it.
 
 use super::geometry::{PrimHit, Shape, TriRay};
+use super::ray_packet::{LaneMask, PacketHits, RayPacket};
 use glam::{Vec3, Vec3A};
 use obvhs::{BvhBuildParams, bvh2::Bvh2, cwbvh::CwBvh, ray::Ray, ray::RayHit};
 
@@ -125,5 +126,41 @@ impl Accel {
             Tree::Cw(b) => b.ray_traverse_miss(ray, |r, i| f(r, i, &b.primitive_indices)),
             Tree::Empty | Tree::Four(_) => true,
         }
+    }
+
+    /// Closest hits of every active lane of `rays`: lane `l` of `out` is
+    /// `intersect` of ray `l` (same primitive and same bits of t and the
+    /// barycentrics; between primitives at exactly the same t either may be
+    /// reported). Inactive lanes report no hit.
+    #[inline(always)]
+    pub fn intersect_packet(&self, rays: &RayPacket, out: &mut PacketHits) {
+        *out = PacketHits::default();
+        let mut m = rays.active;
+        while m != 0 {
+            let l = m.trailing_zeros() as usize;
+            m &= m - 1;
+            let (o, d, tmax) = rays.get(l);
+            if let Some(h) = self.intersect(o, d, tmax) {
+                out.prim[l] = h.prim;
+                out.h[l] = h.h;
+            }
+        }
+    }
+
+    /// The active lanes of `rays` along which nothing blocks the ray (each
+    /// lane as `unoccluded`).
+    #[inline(always)]
+    pub fn unoccluded_packet(&self, rays: &RayPacket) -> LaneMask {
+        let mut m = rays.active;
+        let mut free = 0;
+        while m != 0 {
+            let l = m.trailing_zeros() as usize;
+            m &= m - 1;
+            let (o, d, tmax) = rays.get(l);
+            if self.unoccluded(o, d, tmax) {
+                free |= 1 << l;
+            }
+        }
+        free
     }
 }

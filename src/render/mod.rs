@@ -66,6 +66,7 @@ pub mod film;
 pub mod geometry;
 pub mod integrator;
 pub mod output;
+pub mod ray_packet;
 pub mod sampler;
 pub mod sampling;
 pub mod settings;
