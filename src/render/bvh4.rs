@@ -30,20 +30,20 @@ use obvhs::{BvhBuildParams, bvh2::Bvh2};
 use std::mem::MaybeUninit;
 use wide::f32x4;
 
-const LEAF: u32 = 1 << 31;
-const EMPTY: u32 = u32::MAX;
+pub(super) const LEAF: u32 = 1 << 31;
+pub(super) const EMPTY: u32 = u32::MAX;
 /// Traversal stack size; a tree whose depth could overflow it is not built
 /// (the caller falls back to the binary BVH).
-const STACK: usize = 256;
+pub(super) const STACK: usize = 256;
 
 #[derive(Clone, Copy)]
 #[repr(C, align(16))]
-struct Node4 {
+pub(super) struct Node4 {
     /// `b[0]` = box minima, `b[1]` = maxima; `[axis]`; lanes = children.
-    b: [[f32x4; 3]; 2],
-    child: [u32; 4],
+    pub(super) b: [[f32x4; 3]; 2],
+    pub(super) child: [u32; 4],
     /// Bit l set when lane l holds a child.
-    valid: u32,
+    pub(super) valid: u32,
 }
 
 impl Node4 {
@@ -60,28 +60,28 @@ impl Node4 {
 }
 
 #[derive(Clone, Copy)]
-struct Leaf {
-    packet: u32,
-    others: u32,
-    n_others: u32,
+pub(super) struct Leaf {
+    pub(super) packet: u32,
+    pub(super) others: u32,
+    pub(super) n_others: u32,
 }
 
 /// Up to four triangles, structure of arrays: `v[vertex][axis]`.
 #[derive(Clone, Copy)]
 #[repr(C, align(16))]
-struct TriPacket {
-    v: [[f32x4; 3]; 3],
-    prim: [u32; 4],
+pub(super) struct TriPacket {
+    pub(super) v: [[f32x4; 3]; 3],
+    pub(super) prim: [u32; 4],
     /// Lanes `0..n` hold triangles.
-    n: u32,
+    pub(super) n: u32,
 }
 
 pub struct Bvh4 {
-    nodes: Vec<Node4>,
-    leaves: Vec<Leaf>,
-    packets: Vec<TriPacket>,
-    others: Vec<u32>,
-    root: u32,
+    pub(super) nodes: Vec<Node4>,
+    pub(super) leaves: Vec<Leaf>,
+    pub(super) packets: Vec<TriPacket>,
+    pub(super) others: Vec<u32>,
+    pub(super) root: u32,
 }
 
 /// Per-ray constants for the box and triangle tests.

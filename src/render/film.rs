@@ -1,7 +1,8 @@
 //! The film: pixel sampling, camera weights, batch statistics, labels and
 //! depth, parallel over image rows with per-pixel seeding.
 
-use super::integrator::{Scratch, first_hit, trace};
+use super::integrator::{PacketScratch, PathState, first_hit, trace_packet};
+use super::ray_packet::{LANES, LaneMask};
 use super::sampler::{BatchScramble, Sampler, SamplerKind};
 use super::sampling::Rng;
 use super::settings::RenderSettings;
@@ -245,7 +246,20 @@ impl RowJob<'_> {
             }
         ];
         let py = roi.y + row as u32;
-        let mut sc = Scratch::new(world.bands_padded);
+        let nbp = world.bands_padded;
+        let mut sc = PacketScratch::new(nbp);
+        // Batch bi holds samples bi, bi + batches, …: (spp − bi)/batches of them.
+        let batch_len = |bi: usize| (s.spp as usize - bi).div_ceil(batches);
+        // (batch, index in batch) of the pixel's samples in accumulation order.
+        let order: Vec<(u32, u32)> = (0..batches)
+            .flat_map(|bi| (0..batch_len(bi)).map(move |j| (bi as u32, j as u32)))
+            .collect();
+        let mut scrambles: Vec<BatchScramble> = Vec::with_capacity(batches);
+        let mut smps: Vec<Sampler> = (0..LANES)
+            .map(|_| Sampler::independent(Rng::for_sample(0, 0, 0)))
+            .collect();
+        let mut paths = [PathState::camera(Vec3::ZERO, Vec3::Z, None); LANES];
+        let mut weights = [0.0f64; LANES];
         let mut acc = vec![0.0f64; nb * batches];
         let mut counts = vec![0u32; batches];
         let mut mean_px = vec![0.0f64; nb];
@@ -268,23 +282,28 @@ impl RowJob<'_> {
             let pixel_key = Rng::pixel_key(s.seed, pixel_id);
             acc.iter_mut().for_each(|x| *x = 0.0);
             counts.iter_mut().for_each(|x| *x = 0);
-            for bi in 0..batches {
-                // Samples of batch `bi` are si = bi, bi + batches, … (the same
-                // split and accumulation order as a plain round-robin loop).
-                let nk = (s.spp as usize - bi).div_ceil(batches);
-                let scramble = match s.sampler {
-                    SamplerKind::Sobol => Some(BatchScramble::new(pixel_key, bi as u64, nk)),
-                    SamplerKind::Independent => None,
-                };
-                for j in 0..nk {
+            scrambles.clear();
+            if s.sampler == SamplerKind::Sobol {
+                scrambles.extend(
+                    (0..batches).map(|bi| BatchScramble::new(pixel_key, bi as u64, batch_len(bi))),
+                );
+            }
+            // The pixel's samples in batch order, LANES paths traced together.
+            for chunk in order.chunks(LANES) {
+                let mut alive: LaneMask = 0;
+                for (lane, &(bi, j)) in chunk.iter().enumerate() {
+                    let (bi, j) = (bi as usize, j as usize);
+                    // Samples of batch `bi` are si = bi, bi + batches, … (the same
+                    // split and accumulation order as a plain round-robin loop).
                     let si = bi + j * batches;
                     counts[bi] += 1;
                     // Sample j of batch bi: its film position, lens position
                     // and every path draw are point j of the batch's
                     // scrambled Sobol copies (sampler.rs), so the batch's
                     // film positions are stratified over the pixel.
-                    let mut smp =
-                        Sampler::for_sample(scramble.as_ref(), pixel_key, j as u32, si as u64);
+                    smps[lane] =
+                        Sampler::for_sample(scrambles.get(bi), pixel_key, j as u32, si as u64);
+                    let smp = &mut smps[lane];
                     let (fx, fy) = smp.get2d();
                     let (ua, ub) = smp.get2d();
                     let film_m = DVec2::new(
@@ -306,26 +325,36 @@ impl RowJob<'_> {
                     ) else {
                         continue;
                     };
+                    let beta = &mut sc.beta[lane * nbp..(lane + 1) * nbp];
                     match hero {
-                        Some(b) => sc
-                            .beta
+                        Some(b) => beta
                             .iter_mut()
                             .enumerate()
                             .for_each(|(j, x)| *x = if j == b { nb as f32 } else { 0.0 }),
                         // Padding bands (≥ nb) carry no throughput.
                         None => {
-                            sc.beta[..nb].fill(1.0);
-                            sc.beta[nb..].fill(0.0);
+                            beta[..nb].fill(1.0);
+                            beta[nb..].fill(0.0);
                         }
                     }
-                    trace(world, o, d, s.max_bounces, hero, &mut smp, &mut sc);
-                    if sc.l.iter().any(|x| !x.is_finite()) {
+                    paths[lane] = PathState::camera(o, d, hero);
+                    weights[lane] = weight;
+                    alive |= 1 << lane;
+                }
+                trace_packet(world, &mut paths, alive, s.max_bounces, &mut smps, &mut sc);
+                // Accumulate in sample order.
+                for (lane, &(bi, _)) in chunk.iter().enumerate() {
+                    if alive & (1 << lane) == 0 {
+                        continue;
+                    }
+                    let l = &sc.l[lane * nbp..lane * nbp + nb];
+                    if l.iter().any(|x| !x.is_finite()) {
                         nan += 1;
                         continue;
                     }
-                    let a = &mut acc[bi * nb..(bi + 1) * nb];
-                    for (x, &l) in a.iter_mut().zip(&sc.l) {
-                        *x += l as f64 * weight;
+                    let a = &mut acc[bi as usize * nb..(bi as usize + 1) * nb];
+                    for (x, &l) in a.iter_mut().zip(l) {
+                        *x += l as f64 * weights[lane];
                     }
                 }
             }

@@ -10,7 +10,9 @@
 //! wavelength), scaled by the band count, and terminates the others — unbiased,
 //! and only dispersive paths pay the colour noise.
 
+use super::accel::Hit;
 use super::geometry::offset_ray_origin;
+use super::ray_packet::{LANES, LaneMask, PacketHits, RayPacket};
 use super::sampler::Sampler;
 use super::sampling::{Frame, power_heuristic};
 use super::world::{LightKind, World};
@@ -26,6 +28,7 @@ pub struct Scratch {
     pub beta: Vec<f32>,
     pub l: Vec<f32>,
     f: Vec<f32>,
+    pend: Vec<f32>,
 }
 
 impl Scratch {
@@ -34,6 +37,7 @@ impl Scratch {
             beta: vec![0.0; nb],
             l: vec![0.0; nb],
             f: vec![0.0; nb],
+            pend: vec![0.0; nb],
         }
     }
 }
@@ -80,197 +84,393 @@ fn add_scaled(l: &mut [f32], beta: &[f32], e: &[f32], s: f32) {
     }
 }
 
+/// One path between bounces: the ray it follows next and what its next
+/// hit needs to know (MIS state, bounce count, refraction scale, hero band).
+#[derive(Clone, Copy, Debug)]
+pub struct PathState {
+    pub o: Vec3,
+    pub d: Vec3,
+    specular: bool,
+    prev_pdf: f32,
+    eta_scale: f32,
+    depth: u32,
+    pub hero: Option<usize>,
+}
+
+impl PathState {
+    /// A path leaving the camera along `o + t·d`.
+    #[inline(always)]
+    pub fn camera(o: Vec3, d: Vec3, hero: Option<usize>) -> Self {
+        PathState {
+            o,
+            d,
+            specular: true,
+            prev_pdf: 0.0,
+            eta_scale: 1.0,
+            depth: 0,
+            hero,
+        }
+    }
+}
+
+/// A next-event shadow ray `o + t·d`, t ∈ (0, tmax), whose contribution
+/// waits in the path's pending buffer until the ray is found unblocked.
+#[derive(Clone, Copy, Debug)]
+pub struct ShadowRay {
+    pub o: Vec3,
+    pub d: Vec3,
+    pub tmax: f32,
+}
+
+/// The path escaped the scene: add what the infinite lights send along it.
+#[inline(always)]
+pub fn escape(world: &World, st: &PathState, beta: &[f32], l: &mut [f32]) {
+    for &li in &world.infinite {
+        if let LightKind::Infinite { l: le } = &world.lights[li as usize] {
+            let w = if st.specular {
+                1.0
+            } else {
+                let pl = world.light_pmf[li as usize] / (4.0 * std::f32::consts::PI);
+                power_heuristic(st.prev_pdf, pl)
+            };
+            add_scaled(l, beta, le, w);
+        }
+    }
+}
+
+/// One bounce at the hit `hit` of the path's ray: emission into `l`, the
+/// next-event estimate (its contribution written to `pend`, its shadow ray
+/// returned), BSDF sampling and Russian roulette into `st` and `beta`.
+/// Returns the shadow ray (if any) and whether the path goes on. `f` is
+/// scratch. The draws are taken in the same order whatever happens, so the
+/// caller may test the shadow ray later, alone or in a packet: adding `pend`
+/// to `l` when it is unblocked, before the path's next hit, gives the same
+/// result as testing it here.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub fn scatter(
+    world: &World,
+    st: &mut PathState,
+    hit: &Hit,
+    max_bounces: u32,
+    smp: &mut Sampler,
+    beta: &mut [f32],
+    l: &mut [f32],
+    f: &mut [f32],
+    pend: &mut [f32],
+) -> (Option<ShadowRay>, bool) {
+    let nb = world.bands;
+    let (o, d) = (st.o, st.d);
+    let info = world.info[hit.prim as usize];
+    let (p, p_err, ng) = world.surface(hit.prim, o, d, &hit.h);
+    let dlen = d.length();
+    let wo_w = -d / dlen;
+    // Emission.
+    if info.light != u32::MAX
+        && let LightKind::Area { le, two_sided, .. } = &world.lights[info.light as usize]
+    {
+        let cos_l = ng.dot(wo_w);
+        if cos_l > 0.0 || (*two_sided && cos_l < 0.0) {
+            let w = if st.specular {
+                1.0
+            } else {
+                let pl = world.area_light_pdf(info.light, hit.h.t * dlen, cos_l);
+                power_heuristic(st.prev_pdf, pl)
+            };
+            add_scaled(l, beta, le, w);
+        }
+    }
+    if st.depth >= max_bounces {
+        return (None, false);
+    }
+    let bsdf = &world.bsdfs[info.material as usize];
+    if bsdf.is_black() {
+        return (None, false);
+    }
+    // Shading normal: interpolated if the mesh has normals, else geometric.
+    let mut ns = ng;
+    if info.normals != u32::MAX {
+        let n3 = world.normals[info.normals as usize];
+        let b = hit.h.b;
+        let n = (n3[0] * b[0] + n3[1] * b[1] + n3[2] * b[2]).normalize_or_zero();
+        if n != Vec3::ZERO {
+            ns = if n.dot(ng) < 0.0 { -n } else { n };
+        }
+    }
+    // Opaque materials are two-sided: face the normals towards wo.
+    let transmissive = bsdf.is_transmissive();
+    let (ng_s, ns_s) = if !transmissive && ng.dot(wo_w) < 0.0 {
+        (-ng, -ns)
+    } else {
+        (ng, ns)
+    };
+    let frame = Frame::from_normal(ns_s);
+    let wo = frame.to_local(wo_w);
+
+    if bsdf.is_dispersive() && st.hero.is_none() {
+        // From the sample's own stream: a draw taken by some samples
+        // only would shift the Sobol draws of the rest of the path.
+        let b = ((smp.get1d_independent() * nb as f32) as usize).min(nb - 1);
+        for (j, x) in beta.iter_mut().enumerate() {
+            *x = if j == b { *x * nb as f32 } else { 0.0 };
+        }
+        st.hero = Some(b);
+    }
+
+    // Ray origin for directions on the front side of `ng_s`: shared by the
+    // shadow ray and a reflected continuation ray.
+    let origin_front = offset_ray_origin(p, p_err, ng_s, ng_s);
+
+    // Every bounce takes the same draws in the same order (light choice,
+    // light position, lobe, direction, roulette) whether or not it uses
+    // them, so draw k of every sample of a batch samples the same
+    // dimension of the path (sampler.rs).
+    let u_light = smp.get1d();
+    let (u1, u2) = smp.get2d();
+    let u_lobe = smp.get1d();
+    let (v1, v2) = smp.get2d();
+    let u_rr = smp.get1d();
+
+    // Next-event estimation: the contribution if the light is visible.
+    let mut shadow = None;
+    if !bsdf.is_delta()
+        && wo.z > 0.0
+        && let Some(ls) = world.sample_light(p, u_light, u1, u2)
+    {
+        let wi = frame.to_local(ls.wi);
+        if wi.z > 0.0 && ls.wi.dot(ng_s) > 0.0 {
+            let origin = origin_front;
+            shadow = match ls.target {
+                Some((pl, err_l, nl)) => {
+                    let tgt = if nl == Vec3::ZERO {
+                        pl
+                    } else {
+                        offset_ray_origin(pl, err_l, nl, -ls.wi)
+                    };
+                    // Unit direction: obvhs' slab test clamps tiny inverse components,
+                    // which would misbehave for short unnormalised vectors (mm scenes).
+                    let dv = tgt - origin;
+                    let len = dv.length();
+                    (len > 0.0).then(|| ShadowRay {
+                        o: origin,
+                        d: dv / len,
+                        tmax: len * (1.0 - SHADOW_EPS),
+                    })
+                }
+                None => Some(ShadowRay {
+                    o: origin,
+                    d: ls.wi,
+                    tmax: f32::INFINITY,
+                }),
+            };
+            if shadow.is_some() {
+                let pdf_b = bsdf.eval(wo, wi, f);
+                let w = if ls.delta {
+                    1.0
+                } else {
+                    power_heuristic(ls.pdf, pdf_b)
+                };
+                let s = wi.z * w * ls.scale / ls.pdf;
+                for (((o, &b), &f), &e) in
+                    pend.iter_mut().zip(beta.iter()).zip(f.iter()).zip(ls.spec)
+                {
+                    *o = b * f * e * s;
+                }
+            }
+        }
+    }
+
+    // BSDF sampling.
+    let Some(bs) = bsdf.sample(wo, u_lobe, v1, v2, st.hero, f) else {
+        return (shadow, false);
+    };
+    if !(bs.pdf > 0.0) || !bs.pdf.is_finite() {
+        return (shadow, false);
+    }
+    let wi_w = frame.to_world(bs.wi).normalize();
+    // Reject light leaks: reflection must stay on the geometric side of wo.
+    let same_side = wi_w.dot(ng_s) * wo_w.dot(ng_s) > 0.0;
+    let refl_local = bs.wi.z * wo.z > 0.0;
+    if same_side != refl_local {
+        return (shadow, false);
+    }
+    for (b, &f) in beta.iter_mut().zip(f.iter()) {
+        *b *= f;
+    }
+    st.specular = bs.delta;
+    st.prev_pdf = bs.pdf;
+    st.eta_scale *= bs.eta_scale;
+    st.o = if wi_w.dot(ng_s) >= 0.0 {
+        origin_front
+    } else {
+        offset_ray_origin(p, p_err, ng_s, wi_w)
+    };
+    st.d = wi_w;
+    st.depth += 1;
+    // Russian roulette on the throughput with refraction scaling undone.
+    let mut m = max_band(beta) * st.eta_scale;
+    if st.hero.is_some() {
+        m /= nb as f32;
+    }
+    if !(m > 0.0) {
+        return (shadow, false);
+    }
+    if m < 1.0 && st.depth > 1 {
+        let q = (1.0 - m).max(0.0);
+        if u_rr < q {
+            return (shadow, false);
+        }
+        let s = 1.0 / (1.0 - q);
+        beta.iter_mut().for_each(|b| *b *= s);
+    }
+    (shadow, true)
+}
+
+/// Add a path's pending next-event contribution to its radiance.
+#[inline(always)]
+fn add_pending(l: &mut [f32], pend: &[f32]) {
+    for (o, &x) in l.iter_mut().zip(pend) {
+        *o += x;
+    }
+}
+
 /// Trace one path. On entry `sc.beta` holds the initial throughput (1 for all
 /// bands, or one-hot for a hero camera sample with `hero = Some(band)`).
 /// On return `sc.l` holds the radiance estimate.
 #[inline(always)]
 pub fn trace(
     world: &World,
-    mut o: Vec3,
-    mut d: Vec3,
+    o: Vec3,
+    d: Vec3,
     max_bounces: u32,
-    mut hero: Option<usize>,
+    hero: Option<usize>,
     smp: &mut Sampler,
     sc: &mut Scratch,
 ) {
-    let nb = world.bands;
     sc.l.iter_mut().for_each(|x| *x = 0.0);
-    let mut specular = true;
-    let mut prev_pdf = 0.0f32;
-    let mut eta_scale = 1.0f32;
-    let mut depth = 0u32;
+    let mut st = PathState::camera(o, d, hero);
     loop {
-        let Some(hit) = world.accel.intersect(o, d, f32::INFINITY) else {
-            for &li in &world.infinite {
-                if let LightKind::Infinite { l } = &world.lights[li as usize] {
-                    let w = if specular {
-                        1.0
-                    } else {
-                        let pl = world.light_pmf[li as usize] / (4.0 * std::f32::consts::PI);
-                        power_heuristic(prev_pdf, pl)
-                    };
-                    add_scaled(&mut sc.l, &sc.beta, l, w);
-                }
-            }
+        let Some(hit) = world.accel.intersect(st.o, st.d, f32::INFINITY) else {
+            escape(world, &st, &sc.beta, &mut sc.l);
             break;
         };
-        let info = world.info[hit.prim as usize];
-        let (p, p_err, ng) = world.surface(hit.prim, o, d, &hit.h);
-        let dlen = d.length();
-        let wo_w = -d / dlen;
-        // Emission.
-        if info.light != u32::MAX
-            && let LightKind::Area { le, two_sided, .. } = &world.lights[info.light as usize]
+        let (shadow, alive) = scatter(
+            world,
+            &mut st,
+            &hit,
+            max_bounces,
+            smp,
+            &mut sc.beta,
+            &mut sc.l,
+            &mut sc.f,
+            &mut sc.pend,
+        );
+        if let Some(r) = shadow
+            && world.accel.unoccluded(r.o, r.d, r.tmax)
         {
-            let cos_l = ng.dot(wo_w);
-            if cos_l > 0.0 || (*two_sided && cos_l < 0.0) {
-                let w = if specular {
-                    1.0
-                } else {
-                    let pl = world.area_light_pdf(info.light, hit.h.t * dlen, cos_l);
-                    power_heuristic(prev_pdf, pl)
-                };
-                add_scaled(&mut sc.l, &sc.beta, le, w);
+            add_pending(&mut sc.l, &sc.pend);
+        }
+        if !alive {
+            break;
+        }
+    }
+}
+
+/// Per-thread buffers of a packet of paths: lane `l`'s band vectors are
+/// `[l·stride, (l+1)·stride)` of `beta`, `l` and `pend`.
+pub struct PacketScratch {
+    pub stride: usize,
+    pub beta: Vec<f32>,
+    pub l: Vec<f32>,
+    pend: Vec<f32>,
+    f: Vec<f32>,
+}
+
+impl PacketScratch {
+    pub fn new(nb: usize) -> Self {
+        PacketScratch {
+            stride: nb,
+            beta: vec![0.0; nb * LANES],
+            l: vec![0.0; nb * LANES],
+            pend: vec![0.0; nb * LANES],
+            f: vec![0.0; nb],
+        }
+    }
+}
+
+/// Trace the paths of the lanes in `alive` together (issue 17 item 1): each
+/// bounce casts their rays as one packet, shades each lane, then casts their
+/// shadow rays as one packet. Lane `l` starts from `st[l]` with its
+/// throughput in `sc.beta` and ends with its radiance in `sc.l`, bit for bit
+/// what `trace` gives for that path: each lane takes the same draws and does
+/// the same operations in the same order.
+#[inline(always)]
+pub fn trace_packet(
+    world: &World,
+    st: &mut [PathState; LANES],
+    mut alive: LaneMask,
+    max_bounces: u32,
+    smp: &mut [Sampler],
+    sc: &mut PacketScratch,
+) {
+    let n = sc.stride;
+    sc.l.iter_mut().for_each(|x| *x = 0.0);
+    let mut rays = RayPacket::default();
+    let mut hits = PacketHits::default();
+    let mut shadows = RayPacket::default();
+    while alive != 0 {
+        rays.active = 0;
+        for_lanes(alive, |i| rays.set(i, st[i].o, st[i].d, f32::INFINITY));
+        world.accel.intersect_packet(&rays, &mut hits);
+        shadows.active = 0;
+        let mut m = alive;
+        while m != 0 {
+            let i = m.trailing_zeros() as usize;
+            m &= m - 1;
+            let span = i * n..(i + 1) * n;
+            if hits.prim[i] == u32::MAX {
+                escape(world, &st[i], &sc.beta[span.clone()], &mut sc.l[span]);
+                alive &= !(1 << i);
+                continue;
+            }
+            let hit = Hit {
+                prim: hits.prim[i],
+                h: hits.h[i],
+            };
+            let (shadow, go_on) = scatter(
+                world,
+                &mut st[i],
+                &hit,
+                max_bounces,
+                &mut smp[i],
+                &mut sc.beta[span.clone()],
+                &mut sc.l[span.clone()],
+                &mut sc.f,
+                &mut sc.pend[span],
+            );
+            if let Some(r) = shadow {
+                shadows.set(i, r.o, r.d, r.tmax);
+            }
+            if !go_on {
+                alive &= !(1 << i);
             }
         }
-        if depth >= max_bounces {
-            break;
+        if shadows.active != 0 {
+            let free = world.accel.unoccluded_packet(&shadows);
+            for_lanes(free, |i| {
+                add_pending(&mut sc.l[i * n..(i + 1) * n], &sc.pend[i * n..(i + 1) * n])
+            });
         }
-        let bsdf = &world.bsdfs[info.material as usize];
-        if bsdf.is_black() {
-            break;
-        }
-        // Shading normal: interpolated if the mesh has normals, else geometric.
-        let mut ns = ng;
-        if info.normals != u32::MAX {
-            let n3 = world.normals[info.normals as usize];
-            let b = hit.h.b;
-            let n = (n3[0] * b[0] + n3[1] * b[1] + n3[2] * b[2]).normalize_or_zero();
-            if n != Vec3::ZERO {
-                ns = if n.dot(ng) < 0.0 { -n } else { n };
-            }
-        }
-        // Opaque materials are two-sided: face the normals towards wo.
-        let transmissive = bsdf.is_transmissive();
-        let (ng_s, ns_s) = if !transmissive && ng.dot(wo_w) < 0.0 {
-            (-ng, -ns)
-        } else {
-            (ng, ns)
-        };
-        let frame = Frame::from_normal(ns_s);
-        let wo = frame.to_local(wo_w);
+    }
+}
 
-        if bsdf.is_dispersive() && hero.is_none() {
-            // From the sample's own stream: a draw taken by some samples
-            // only would shift the Sobol draws of the rest of the path.
-            let b = ((smp.get1d_independent() * nb as f32) as usize).min(nb - 1);
-            for (j, x) in sc.beta.iter_mut().enumerate() {
-                *x = if j == b { *x * nb as f32 } else { 0.0 };
-            }
-            hero = Some(b);
-        }
-
-        // Ray origin for directions on the front side of `ng_s`: shared by the
-        // shadow ray and a reflected continuation ray.
-        let origin_front = offset_ray_origin(p, p_err, ng_s, ng_s);
-
-        // Every bounce takes the same draws in the same order (light choice,
-        // light position, lobe, direction, roulette) whether or not it uses
-        // them, so draw k of every sample of a batch samples the same
-        // dimension of the path (sampler.rs).
-        let u_light = smp.get1d();
-        let (u1, u2) = smp.get2d();
-        let u_lobe = smp.get1d();
-        let (v1, v2) = smp.get2d();
-        let u_rr = smp.get1d();
-
-        // Next-event estimation.
-        if !bsdf.is_delta()
-            && wo.z > 0.0
-            && let Some(ls) = world.sample_light(p, u_light, u1, u2)
-        {
-            let wi = frame.to_local(ls.wi);
-            if wi.z > 0.0 && ls.wi.dot(ng_s) > 0.0 {
-                // The BSDF is evaluated only for unoccluded samples (below):
-                // it draws no random numbers, so the result is unchanged.
-                let origin = origin_front;
-                let visible = match ls.target {
-                    Some((pl, err_l, nl)) => {
-                        let tgt = if nl == Vec3::ZERO {
-                            pl
-                        } else {
-                            offset_ray_origin(pl, err_l, nl, -ls.wi)
-                        };
-                        // Unit direction: obvhs' slab test clamps tiny inverse components,
-                        // which would misbehave for short unnormalised vectors (mm scenes).
-                        let dv = tgt - origin;
-                        let len = dv.length();
-                        len > 0.0
-                            && world
-                                .accel
-                                .unoccluded(origin, dv / len, len * (1.0 - SHADOW_EPS))
-                    }
-                    None => world.accel.unoccluded(origin, ls.wi, f32::INFINITY),
-                };
-                if visible {
-                    let pdf_b = bsdf.eval(wo, wi, &mut sc.f);
-                    let w = if ls.delta {
-                        1.0
-                    } else {
-                        power_heuristic(ls.pdf, pdf_b)
-                    };
-                    let s = wi.z * w * ls.scale / ls.pdf;
-                    for (((o, &b), &f), &e) in sc.l.iter_mut().zip(&sc.beta).zip(&sc.f).zip(ls.spec)
-                    {
-                        *o += b * f * e * s;
-                    }
-                }
-            }
-        }
-
-        // BSDF sampling.
-        let Some(bs) = bsdf.sample(wo, u_lobe, v1, v2, hero, &mut sc.f) else {
-            break;
-        };
-        if !(bs.pdf > 0.0) || !bs.pdf.is_finite() {
-            break;
-        }
-        let wi_w = frame.to_world(bs.wi).normalize();
-        // Reject light leaks: reflection must stay on the geometric side of wo.
-        let same_side = wi_w.dot(ng_s) * wo_w.dot(ng_s) > 0.0;
-        let refl_local = bs.wi.z * wo.z > 0.0;
-        if same_side != refl_local {
-            break;
-        }
-        for (b, &f) in sc.beta.iter_mut().zip(&sc.f) {
-            *b *= f;
-        }
-        specular = bs.delta;
-        prev_pdf = bs.pdf;
-        eta_scale *= bs.eta_scale;
-        o = if wi_w.dot(ng_s) >= 0.0 {
-            origin_front
-        } else {
-            offset_ray_origin(p, p_err, ng_s, wi_w)
-        };
-        d = wi_w;
-        depth += 1;
-        // Russian roulette on the throughput with refraction scaling undone.
-        let mut m = max_band(&sc.beta) * eta_scale;
-        if hero.is_some() {
-            m /= nb as f32;
-        }
-        if !(m > 0.0) {
-            break;
-        }
-        if m < 1.0 && depth > 1 {
-            let q = (1.0 - m).max(0.0);
-            if u_rr < q {
-                break;
-            }
-            let s = 1.0 / (1.0 - q);
-            sc.beta.iter_mut().for_each(|b| *b *= s);
-        }
+/// Call `f` for each lane set in `m`, lowest first.
+#[inline(always)]
+fn for_lanes(mut m: LaneMask, mut f: impl FnMut(usize)) {
+    while m != 0 {
+        let i = m.trailing_zeros() as usize;
+        m &= m - 1;
+        f(i);
     }
 }
 

@@ -62,6 +62,7 @@ pub mod accel;
 pub mod bench;
 pub mod bsdf;
 pub mod bvh4;
+pub mod bvh4_packet;
 pub mod film;
 pub mod geometry;
 pub mod integrator;
