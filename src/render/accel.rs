@@ -134,6 +134,9 @@ impl Accel {
     /// reported). Inactive lanes report no hit.
     #[inline(always)]
     pub fn intersect_packet(&self, rays: &RayPacket, out: &mut PacketHits) {
+        if let Tree::Four(b) = &self.tree {
+            return b.intersect_packet(&self.shapes, rays, out);
+        }
         *out = PacketHits::default();
         let mut m = rays.active;
         while m != 0 {
@@ -151,6 +154,9 @@ impl Accel {
     /// lane as `unoccluded`).
     #[inline(always)]
     pub fn unoccluded_packet(&self, rays: &RayPacket) -> LaneMask {
+        if let Tree::Four(b) = &self.tree {
+            return b.unoccluded_packet(&self.shapes, rays);
+        }
         let mut m = rays.active;
         let mut free = 0;
         while m != 0 {

@@ -9,26 +9,37 @@
 //!   triangle test (exact-zero edges re-evaluated in f64, pbrt-v4's `t > δt`)
 //!   with the lane's closest t at leaf entry as tmax, the same closest-hit
 //!   rule (strictly closer, triangles of a leaf in order). The per-lane axis
-//!   permutation of the triangle test is done by selecting the vertex
-//!   components per lane. Spheres and disks keep the scalar tests, lane by
-//!   lane.
-//! - Traversal: a stack of (node, lane mask, per-lane entry distance). An
-//!   inner node tests each child box against all lanes of its mask (each
-//!   lane's tmax = its closest hit so far); the children hit by some lane are
-//!   visited nearest first (by the smallest entry distance over their lanes).
-//!   A popped node keeps only the lanes whose entry distance is not beyond
-//!   their closest hit. Occlusion drops blocked lanes from every mask and
-//!   stops when none is left.
-//! - Lane loops are plain loops over `[f32; 16]`, `#[inline(always)]` down to
-//!   the leaves, so the render kernel's per-instruction-set copies
-//!   (`simd.rs`) vectorise them 16, 8 or 4 lanes wide.
+//!   permutation of the triangle test selects the vertex components per
+//!   lane. Spheres and disks keep the scalar tests, lane by lane.
+//! - Traversal: a stack of (node, per-lane entry distance, NaN in lanes that
+//!   do not need the node). An inner node tests each child box against the
+//!   node's lanes (each lane's tmax = its closest hit so far), continues into
+//!   the first child hit by some lane and stacks the others; a popped node
+//!   keeps only the lanes whose entry is not beyond their closest hit.
+//!   Ordering the children by their lanes' nearest entry was measured slower
+//!   on Cornell box bounces: with incoherent rays no order suits most lanes,
+//!   and the reduction and sort cost more than they save. Occlusion drops
+//!   blocked lanes from every mask and stops when none is left.
+//! - Lane loops are plain loops over `[f32; 16]` / `[i32; 16]` (`V`, `M`),
+//!   `#[inline(always)]` down to the leaves, so the render kernel's
+//!   per-instruction-set copies (`simd.rs`) vectorise them 16, 8 or 4 lanes
+//!   wide. What keeps LLVM's code vector-wide: lane masks are vectors of
+//!   0 / −1 tested with `any` only (one `kortest` / `movmsk`; a 16-bit mask
+//!   built lane by lane becomes a long shuffle-and-or reduction), no
+//!   closures or `array::map` in lane code (left as calls), 3-trip loops
+//!   written out (`unroll3`), and the rare f64 edge fallback kept scalar (as
+//!   a vector blend LLVM computed it on every triangle test).
 //!
-//! Results per lane equal the single-ray query's bit for bit, with one
-//! caveat shared with the single-ray traversal itself: the lanes visit leaves
-//! in a different order, so when two primitives' distances lie within a few
-//! ulps of each other the rounding of the `t ≤ tmax` test against the closest
-//! hit so far could differ (not seen in the tests); between primitives at
-//! exactly the same t either may be reported.
+//! Results per lane equal the single-ray query's bit for bit (t,
+//! barycentrics, primitive; between primitives at exactly the same t either
+//! may be reported), with one exception inherent to the single-ray traversal
+//! itself: the lanes visit leaves in another order, and a box is culled when
+//! its entry distance (rounded differently from a triangle's t) lies beyond
+//! the closest hit so far. So for two primitives within a few ulps of each
+//! other along a ray (coplanar overlapping faces, e.g. a box's bottom lying
+//! on the floor, seen from inside the box) either query may report either
+//! one; each reports that primitive's own exact hit. The tests saw 2 such
+//! rays in 21 500 random Cornell box rays and none among path-traced bounces.
 //!
 //! Why: in small scenes such as the Cornell box, single-ray traversal of
 //! incoherent secondary rays is dominated by unpredictable branches; a packet
@@ -41,295 +52,403 @@ use super::bvh4::{Bvh4, EMPTY, LEAF, Node4, STACK};
 use super::geometry::{PrimHit, Shape, TriRay, gamma};
 use super::ray_packet::{ALL_LANES, LANES, LaneMask, PacketHits, RayPacket};
 use std::mem::MaybeUninit;
+use std::ops::{Add, BitAnd, BitOr, Div, Mul, Not, Sub};
+
+/// `body` once for each of `$i` = 0, 1, 2, written out: LLVM's AVX-512 cost
+/// model would otherwise vectorise a 3-trip loop of 16-lane code across its
+/// iterations, with masked scatters.
+macro_rules! unroll3 {
+    ($i:ident => $body:block) => {{
+        {
+            let $i = 0usize;
+            $body
+        }
+        {
+            let $i = 1usize;
+            $body
+        }
+        {
+            let $i = 2usize;
+            $body
+        }
+    }};
+}
 
 /// One f32 per lane.
-type F = [f32; LANES];
+#[derive(Clone, Copy)]
+#[repr(C, align(64))]
+struct V([f32; LANES]);
 
-/// x86 `maxps` (what `wide`'s `fast_max` compiles to): `a` when `a > b`, else `b`.
-#[inline(always)]
-fn maxps(a: f32, b: f32) -> f32 {
-    if a > b { a } else { b }
-}
+/// A lane mask: 0 or −1 per lane.
+#[derive(Clone, Copy)]
+#[repr(C, align(64))]
+struct M([i32; LANES]);
 
-/// x86 `minps` (`wide`'s `fast_min`): `a` when `a < b`, else `b`.
-#[inline(always)]
-fn minps(a: f32, b: f32) -> f32 {
-    if a < b { a } else { b }
-}
-
-/// `wide`'s NaN-aware `max`: `a` when `b` is NaN, else `maxps(a, b)`.
-#[inline(always)]
-fn max_wide(a: f32, b: f32) -> f32 {
-    if b.is_nan() || a > b { a } else { b }
-}
-
-/// Lane mask of the lanes where `f` holds.
-#[inline(always)]
-fn bits(f: impl Fn(usize) -> bool) -> LaneMask {
-    let mut m = 0;
-    for l in 0..LANES {
-        m |= (f(l) as LaneMask) << l;
-    }
-    m
-}
-
-/// `a` in the lanes of `m`, `b` elsewhere.
-#[inline(always)]
-fn select(m: LaneMask, a: &F, b: &F) -> F {
-    std::array::from_fn(|l| if m & (1 << l) != 0 { a[l] } else { b[l] })
-}
-
-/// The smallest of `v` over the lanes of `m` (∞ for none).
-#[inline(always)]
-fn min_over(m: LaneMask, v: &F) -> f32 {
-    let mut a: F = std::array::from_fn(|l| {
-        if m & (1 << l) != 0 {
-            v[l]
-        } else {
-            f32::INFINITY
+macro_rules! lanewise {
+    ($t:ident, $tr:ident, $f:ident, $op:tt) => {
+        impl $tr for $t {
+            type Output = $t;
+            #[inline(always)]
+            fn $f(self, b: $t) -> $t {
+                let mut r = self;
+                for l in 0..LANES {
+                    r.0[l] = self.0[l] $op b.0[l];
+                }
+                r
+            }
         }
-    });
-    // Pairwise, so it vectorises (the order does not matter for a minimum
-    // used only to order the traversal).
-    let mut w = LANES / 2;
-    while w > 0 {
-        for l in 0..w {
-            a[l] = minps(a[l], a[l + w]);
+    };
+}
+lanewise!(V, Add, add, +);
+lanewise!(V, Sub, sub, -);
+lanewise!(V, Mul, mul, *);
+lanewise!(V, Div, div, /);
+lanewise!(M, BitAnd, bitand, &);
+lanewise!(M, BitOr, bitor, |);
+
+impl Not for M {
+    type Output = M;
+    #[inline(always)]
+    fn not(self) -> M {
+        let mut r = self;
+        for l in 0..LANES {
+            r.0[l] = !self.0[l];
         }
-        w /= 2;
+        r
     }
-    a[0]
 }
 
-/// Iterate over the set bits of a lane mask.
+/// `V` comparisons giving masks.
+macro_rules! compare {
+    ($f:ident, $op:tt) => {
+        #[inline(always)]
+        fn $f(self, b: V) -> M {
+            let mut r = [0; LANES];
+            for l in 0..LANES {
+                r[l] = -((self.0[l] $op b.0[l]) as i32);
+            }
+            M(r)
+        }
+    };
+}
+
+impl M {
+    /// Lanes set in a bit mask.
+    #[inline(always)]
+    fn from_bits(b: LaneMask) -> M {
+        let mut r = [0; LANES];
+        for l in 0..LANES {
+            r[l] = -((b >> l) as i32 & 1);
+        }
+        M(r)
+    }
+
+    /// True when some lane is set (one `kortest` / `movmsk`).
+    #[inline(always)]
+    fn any(self) -> bool {
+        let mut r = 0;
+        for l in 0..LANES {
+            r |= self.0[l];
+        }
+        r != 0
+    }
+
+    #[inline(always)]
+    fn get(&self, l: usize) -> bool {
+        self.0[l] != 0
+    }
+
+    /// As a bit mask (scalar; outside the hot loops).
+    #[inline(always)]
+    fn bits(self) -> LaneMask {
+        let mut b = 0;
+        for l in 0..LANES {
+            if self.get(l) {
+                b |= 1 << l;
+            }
+        }
+        b
+    }
+}
+
+impl V {
+    #[inline(always)]
+    fn splat(x: f32) -> V {
+        V([x; LANES])
+    }
+
+    compare!(lt, <);
+    compare!(le, <=);
+    compare!(gt, >);
+    compare!(eq, ==);
+
+    /// `a` in the lanes of `m`, `self` elsewhere.
+    #[inline(always)]
+    fn blend(self, m: M, a: V) -> V {
+        let mut r = self;
+        for l in 0..LANES {
+            let (x, y) = (a.0[l], self.0[l]);
+            r.0[l] = if m.0[l] != 0 { x } else { y };
+        }
+        r
+    }
+
+    /// x86 `maxps` (what `wide`'s `fast_max` compiles to): `a` when `a > b`, else `b`.
+    #[inline(always)]
+    fn maxps(self, b: V) -> V {
+        let mut r = self;
+        for l in 0..LANES {
+            let (x, y) = (self.0[l], b.0[l]);
+            r.0[l] = if x > y { x } else { y };
+        }
+        r
+    }
+
+    /// x86 `minps` (`wide`'s `fast_min`): `a` when `a < b`, else `b`.
+    #[inline(always)]
+    fn minps(self, b: V) -> V {
+        let mut r = self;
+        for l in 0..LANES {
+            let (x, y) = (self.0[l], b.0[l]);
+            r.0[l] = if x < y { x } else { y };
+        }
+        r
+    }
+
+    /// `wide`'s NaN-aware `max`: `a` when `b` is NaN, else `maxps(a, b)`.
+    #[inline(always)]
+    fn max_wide(self, b: V) -> V {
+        let mut r = self;
+        for l in 0..LANES {
+            let (x, y) = (self.0[l], b.0[l]);
+            r.0[l] = if y.is_nan() | (x > y) { x } else { y };
+        }
+        r
+    }
+
+    #[inline(always)]
+    fn abs(self) -> V {
+        let mut r = self;
+        for l in 0..LANES {
+            r.0[l] = self.0[l].abs();
+        }
+        r
+    }
+
+    #[inline(always)]
+    fn neg(self) -> V {
+        let mut r = self;
+        for l in 0..LANES {
+            r.0[l] = -self.0[l];
+        }
+        r
+    }
+}
+
+/// The three components permuted per lane as the triangle test's axes
+/// (kx, ky, kz): kz = 0 gives (y, z, x), kz = 1 (z, x, y), kz = 2 (x, y, z).
 #[inline(always)]
-fn lanes(mut m: LaneMask) -> impl Iterator<Item = usize> {
-    std::iter::from_fn(move || {
-        (m != 0).then(|| {
-            let l = m.trailing_zeros() as usize;
-            m &= m - 1;
-            l
-        })
-    })
+fn permute(v: [V; 3], kz0: M, kz1: M) -> [V; 3] {
+    [
+        v[0].blend(kz1, v[2]).blend(kz0, v[1]),
+        v[1].blend(kz1, v[0]).blend(kz0, v[2]),
+        v[2].blend(kz1, v[1]).blend(kz0, v[0]),
+    ]
+}
+
+/// Lane-wise max of the absolute values of three vectors, as `RayPre::packet`.
+#[inline(always)]
+fn max3_abs(v: &[V; 3]) -> V {
+    v[0].abs().max_wide(v[1].abs()).max_wide(v[2].abs())
 }
 
 /// Per-lane ray constants: what `RayPre::new` computes for each ray.
 struct PacketPre {
-    o: [F; 3],
-    d: [F; 3],
+    o: [V; 3],
+    d: [V; 3],
     /// Inverse direction, clamped to ±1e30.
-    inv: [F; 3],
-    /// Origin permuted as the triangle test's axes: `o[kx]`, `o[ky]`, `o[kz]`.
-    op: [F; 3],
-    /// Shear `sx`, `sy`, `sz` of `TriRay`.
-    s: [F; 3],
-    /// Dominant axis of the direction (`TriRay::kz`).
-    kz: [u32; LANES],
+    inv: [V; 3],
+    /// Origin in the triangle test's permuted axes: `o[kx]`, `o[ky]`, `o[kz]`.
+    op: [V; 3],
+    /// `TriRay`'s shear `sx`, `sy`, `sz`.
+    s: [V; 3],
+    /// Lanes whose dominant direction axis (`TriRay::kz`) is x, resp. y
+    /// (neither: z).
+    kz0: M,
+    kz1: M,
 }
 
-/// A lane set of triangle hits: t, edge functions and 1/det per lane.
+/// Triangle hits of a set of lanes: t, edge functions and 1/det per lane.
 struct TriHits {
-    t: F,
-    e: [F; 3],
-    inv_det: F,
+    t: V,
+    e: [V; 3],
+    inv_det: V,
 }
 
 impl PacketPre {
     #[inline(always)]
     fn new(r: &RayPacket) -> Self {
-        let mut p = PacketPre {
-            o: r.o,
-            d: r.d,
-            inv: [[0.0; LANES]; 3],
-            op: [[0.0; LANES]; 3],
-            s: [[0.0; LANES]; 3],
-            kz: [0; LANES],
-        };
-        for l in 0..LANES {
-            let d = [r.d[0][l], r.d[1][l], r.d[2][l]];
-            let o = [r.o[0][l], r.o[1][l], r.o[2][l]];
-            // As `TriRay::new`: the largest |d| component becomes z.
-            let (ax, ay, az) = (d[0].abs(), d[1].abs(), d[2].abs());
-            let kz = if ax > ay {
-                if ax > az { 0 } else { 2 }
-            } else if ay > az {
-                1
-            } else {
-                2
-            };
-            let perm = |v: [f32; 3]| match kz {
-                0 => [v[1], v[2], v[0]],
-                1 => [v[2], v[0], v[1]],
-                _ => v,
-            };
-            let dp = perm(d);
-            let op = perm(o);
-            let sz = 1.0 / dp[2];
-            p.s[0][l] = -dp[0] * sz;
-            p.s[1][l] = -dp[1] * sz;
-            p.s[2][l] = sz;
-            p.kz[l] = kz;
-            for a in 0..3 {
-                p.op[a][l] = op[a];
-                // As `RayPre::new`.
-                let i = 1.0 / d[a];
-                p.inv[a][l] = if i.abs() <= 1e30 {
+        let o = [V(r.o[0]), V(r.o[1]), V(r.o[2])];
+        let d = [V(r.d[0]), V(r.d[1]), V(r.d[2])];
+        // As `TriRay::new`: the largest |d| component becomes z.
+        let [ax, ay, az] = [d[0].abs(), d[1].abs(), d[2].abs()];
+        let x_y = ax.gt(ay);
+        let kz0 = x_y & ax.gt(az);
+        let kz1 = !x_y & ay.gt(az);
+        let dp = permute(d, kz0, kz1);
+        let sz = V::splat(1.0) / dp[2];
+        // As `RayPre::new`.
+        let mut inv = [V::splat(0.0); 3];
+        unroll3!(a => {
+            inv[a] = V::splat(1.0) / d[a];
+            for l in 0..LANES {
+                let (i, c) = (inv[a].0[l], d[a].0[l]);
+                inv[a].0[l] = if i.abs() <= 1e30 {
                     i
                 } else {
-                    1e30f32.copysign(d[a])
+                    1e30f32.copysign(c)
                 };
             }
+        });
+        PacketPre {
+            o,
+            d,
+            inv,
+            op: permute(o, kz0, kz1),
+            s: [dp[0].neg() * sz, dp[1].neg() * sz, sz],
+            kz0,
+            kz1,
         }
-        p
     }
 
-    /// The lane's `TriRay` (for the scalar sphere and disk tests).
+    /// The lane's `TriRay` and direction (for the scalar sphere and disk tests).
     #[inline(always)]
     fn tri_ray(&self, l: usize) -> (TriRay, glam::Vec3) {
-        let o = glam::Vec3::new(self.o[0][l], self.o[1][l], self.o[2][l]);
-        let d = glam::Vec3::new(self.d[0][l], self.d[1][l], self.d[2][l]);
+        let o = glam::Vec3::new(self.o[0].0[l], self.o[1].0[l], self.o[2].0[l]);
+        let d = glam::Vec3::new(self.d[0].0[l], self.d[1].0[l], self.d[2].0[l]);
+        let kz = if self.kz0.get(l) {
+            0
+        } else if self.kz1.get(l) {
+            1
+        } else {
+            2
+        };
         let tri = TriRay {
             o,
-            kz: self.kz[l] as u8,
-            sx: self.s[0][l],
-            sy: self.s[1][l],
-            sz: self.s[2][l],
+            kz,
+            sx: self.s[0].0[l],
+            sy: self.s[1].0[l],
+            sz: self.s[2].0[l],
         };
         (tri, d)
     }
 
-    /// Slab test of child `c` of `n` for every lane: entry distances and the
-    /// mask of lanes hitting the box within (0, tmax] (`RayPre::boxes`).
+    /// Slab test of child `c` of `n` for every lane: the lanes hitting the
+    /// box within (0, tmax] and their entry distances (`RayPre::boxes`).
     #[inline(always)]
-    fn child_box(&self, n: &Node4, c: usize, tmax: &F) -> (LaneMask, F) {
-        let mut tn = [0.0f32; LANES];
-        let mut tf = *tmax;
-        for a in 0..3 {
-            let lo = n.b[0][a].as_array()[c];
-            let hi = n.b[1][a].as_array()[c];
-            for l in 0..LANES {
-                let t0 = (lo - self.o[a][l]) * self.inv[a][l];
-                let t1 = (hi - self.o[a][l]) * self.inv[a][l];
-                tn[l] = maxps(tn[l], minps(t0, t1));
-                tf[l] = minps(tf[l], maxps(t0, t1));
-            }
-        }
-        let w = 1.0 + 2.0 * gamma(3);
-        (bits(|l| tn[l] <= tf[l] * w), tn)
+    fn child_box(&self, n: &Node4, c: usize, tmax: V) -> (M, V) {
+        let mut tn = V::splat(0.0);
+        let mut tf = tmax;
+        unroll3!(a => {
+            let lo = V::splat(n.b[0][a].as_array()[c]);
+            let hi = V::splat(n.b[1][a].as_array()[c]);
+            let t0 = (lo - self.o[a]) * self.inv[a];
+            let t1 = (hi - self.o[a]) * self.inv[a];
+            tn = tn.maxps(t0.minps(t1));
+            tf = tf.minps(t0.maxps(t1));
+        });
+        tf = tf * V::splat(1.0 + 2.0 * gamma(3));
+        (tn.le(tf), tn)
     }
 
     /// Watertight test of triangle `v[vertex][axis]` against the lanes of
-    /// `m` (`RayPre::packet`, one triangle, 16 rays). Returns the lanes that
-    /// hit it in (δt, tmax] and fills `h` for them.
+    /// `m` (`RayPre::packet` for one triangle and 16 rays). Returns the lanes
+    /// that hit it in (δt, tmax] and fills `h` for them.
     #[inline(always)]
-    fn triangle(&self, v: &[[f32; 3]; 3], tmax: &F, m: LaneMask, h: &mut TriHits) -> LaneMask {
-        let mut px = [[0.0f32; LANES]; 3];
-        let mut py = [[0.0f32; LANES]; 3];
-        let mut pz = [[0.0f32; LANES]; 3];
-        for i in 0..3 {
-            let [x, y, z] = v[i];
-            for l in 0..LANES {
-                // The vertex in the lane's permuted axes (kx, ky, kz).
-                let k = self.kz[l];
-                let vx = if k == 0 {
-                    y
-                } else if k == 1 {
-                    z
-                } else {
-                    x
-                };
-                let vy = if k == 0 {
-                    z
-                } else if k == 1 {
-                    x
-                } else {
-                    y
-                };
-                let vz = if k == 0 {
-                    x
-                } else if k == 1 {
-                    y
-                } else {
-                    z
-                };
-                let zt = vz - self.op[2][l];
-                px[i][l] = (vx - self.op[0][l]) + self.s[0][l] * zt;
-                py[i][l] = (vy - self.op[1][l]) + self.s[1][l] * zt;
-                pz[i][l] = zt;
-            }
-        }
-        let mut e = [[0.0f32; LANES]; 3];
-        for l in 0..LANES {
-            e[0][l] = px[1][l] * py[2][l] - py[1][l] * px[2][l];
-            e[1][l] = px[2][l] * py[0][l] - py[2][l] * px[0][l];
-            e[2][l] = px[0][l] * py[1][l] - py[0][l] * px[1][l];
-        }
-        let zero = m & bits(|l| (e[0][l] == 0.0) | (e[1][l] == 0.0) | (e[2][l] == 0.0));
-        if zero != 0 {
+    fn triangle(&self, v: &[[f32; 3]; 3], tmax: V, m: M, h: &mut TriHits) -> M {
+        let mut px = [V::splat(0.0); 3];
+        let mut py = px;
+        let mut pz = px;
+        unroll3!(i => {
+            let [x, y, z] = [V::splat(v[i][0]), V::splat(v[i][1]), V::splat(v[i][2])];
+            let [vx, vy, vz] = permute([x, y, z], self.kz0, self.kz1);
+            pz[i] = vz - self.op[2];
+            px[i] = (vx - self.op[0]) + self.s[0] * pz[i];
+            py[i] = (vy - self.op[1]) + self.s[1] * pz[i];
+        });
+        let mut e = [
+            px[1] * py[2] - py[1] * px[2],
+            px[2] * py[0] - py[2] * px[0],
+            px[0] * py[1] - py[0] * px[1],
+        ];
+        let zero = V::splat(0.0);
+        let any_zero = m & (e[0].eq(zero) | e[1].eq(zero) | e[2].eq(zero));
+        if any_zero.any() {
             // Exact-zero edge: re-evaluate those lanes in f64 (rare).
             let f = |ax: f32, ay: f32, bx: f32, by: f32| {
                 (ax as f64 * by as f64 - ay as f64 * bx as f64) as f32
             };
-            for l in lanes(zero) {
-                e[0][l] = f(px[1][l], py[1][l], px[2][l], py[2][l]);
-                e[1][l] = f(px[2][l], py[2][l], px[0][l], py[0][l]);
-                e[2][l] = f(px[0][l], py[0][l], px[1][l], py[1][l]);
+            for l in 0..LANES {
+                if any_zero.get(l) {
+                    let x = [px[0].0[l], px[1].0[l], px[2].0[l]];
+                    let y = [py[0].0[l], py[1].0[l], py[2].0[l]];
+                    e[0].0[l] = f(x[1], y[1], x[2], y[2]);
+                    e[1].0[l] = f(x[2], y[2], x[0], y[0]);
+                    e[2].0[l] = f(x[0], y[0], x[1], y[1]);
+                }
             }
         }
-        let [e0, e1, e2] = &e;
-        let inside = m & !bits(|l| {
-            let neg = (e0[l] < 0.0) | (e1[l] < 0.0) | (e2[l] < 0.0);
-            let pos = (e0[l] > 0.0) | (e1[l] > 0.0) | (e2[l] > 0.0);
-            neg & pos
+        let neg = e[0].lt(zero) | e[1].lt(zero) | e[2].lt(zero);
+        let pos = e[0].gt(zero) | e[1].gt(zero) | e[2].gt(zero);
+        let inside = m & !(neg & pos);
+        if !inside.any() {
+            return inside;
+        }
+        let det = e[0] + e[1] + e[2];
+        let sz = self.s[2];
+        unroll3!(i => {
+            pz[i] = pz[i] * sz;
         });
-        if inside == 0 {
-            return 0;
+        let ts = e[0] * pz[0] + e[1] * pz[1] + e[2] * pz[2];
+        let tmd = tmax * det;
+        let in_neg = det.lt(zero) & ts.lt(zero) & tmd.le(ts);
+        let in_pos = det.gt(zero) & ts.gt(zero) & ts.le(tmd);
+        let hit = inside & (in_neg | in_pos);
+        if !hit.any() {
+            return hit;
         }
-        let mut det = [0.0f32; LANES];
-        let mut ts = [0.0f32; LANES];
-        for l in 0..LANES {
-            det[l] = e0[l] + e1[l] + e2[l];
-            for z in &mut pz {
-                z[l] *= self.s[2][l];
-            }
-            ts[l] = e0[l] * pz[0][l] + e1[l] * pz[1][l] + e2[l] * pz[2][l];
-        }
-        let mut hit = inside
-            & bits(|l| {
-                let tmd = tmax[l] * det[l];
-                let neg = (det[l] < 0.0) & (ts[l] < 0.0) & (tmd <= ts[l]);
-                let pos = (det[l] > 0.0) & (ts[l] > 0.0) & (ts[l] <= tmd);
-                neg | pos
-            });
-        if hit == 0 {
-            return 0;
-        }
+        let inv_det = V::splat(1.0) / det;
+        let t = ts * inv_det;
         // Conservative check that t is positive beyond its rounding error (pbrt-v4).
-        let max3 =
-            |v: &[F; 3], l: usize| max_wide(max_wide(v[0][l].abs(), v[1][l].abs()), v[2][l].abs());
-        for l in 0..LANES {
-            let inv_det = 1.0 / det[l];
-            let t = ts[l] * inv_det;
-            let max_zt = max3(&pz, l);
-            let max_xt = max3(&px, l);
-            let max_yt = max3(&py, l);
-            let delta_z = gamma(3) * max_zt;
-            let delta_x = gamma(5) * (max_xt + max_zt);
-            let delta_y = gamma(5) * (max_yt + max_zt);
-            let delta_e = 2.0 * (gamma(2) * max_xt * max_yt + delta_y * max_xt + delta_x * max_yt);
-            let max_e = max3(&e, l);
-            let delta_t = 3.0
-                * (gamma(3) * max_e * max_zt + delta_e * max_zt + delta_z * max_e)
-                * inv_det.abs();
-            h.t[l] = t;
-            h.inv_det[l] = inv_det;
-            // Stored as a flag in `det` (free after this loop).
-            det[l] = if t > delta_t { 1.0 } else { 0.0 };
-        }
-        hit &= bits(|l| det[l] != 0.0);
+        let max_zt = max3_abs(&pz);
+        let max_xt = max3_abs(&px);
+        let max_yt = max3_abs(&py);
+        let (g2, g3, g5) = (V::splat(gamma(2)), V::splat(gamma(3)), V::splat(gamma(5)));
+        let delta_z = g3 * max_zt;
+        let delta_x = g5 * (max_xt + max_zt);
+        let delta_y = g5 * (max_yt + max_zt);
+        let delta_e = V::splat(2.0) * (g2 * max_xt * max_yt + delta_y * max_xt + delta_x * max_yt);
+        let max_e = max3_abs(&e);
+        let delta_t = V::splat(3.0)
+            * (g3 * max_e * max_zt + delta_e * max_zt + delta_z * max_e)
+            * inv_det.abs();
+        h.t = t;
         h.e = e;
-        hit
+        h.inv_det = inv_det;
+        hit & t.gt(delta_t)
     }
+}
+
+/// Vertex `[vertex][axis]` of triangle `j` of a leaf's packet.
+#[inline(always)]
+fn vertices(p: &super::bvh4::TriPacket, j: usize) -> [[f32; 3]; 3] {
+    let mut v = [[0.0; 3]; 3];
+    unroll3!(i => {
+        unroll3!(a => {
+            v[i][a] = p.v[i][a].as_array()[j];
+        });
+    });
+    v
 }
 
 impl Bvh4 {
@@ -343,20 +462,21 @@ impl Bvh4 {
             return;
         }
         let r = PacketPre::new(rays);
-        let mut best_t = rays.tmax;
-        let mut best_b = [[0.0f32; LANES]; 3];
+        let mut best_t = V(rays.tmax);
+        let mut best_b = [V::splat(0.0); 3];
         let mut best_prim = [EMPTY; LANES];
         let mut h = TriHits {
-            t: [0.0; LANES],
-            e: [[0.0; LANES]; 3],
-            inv_det: [0.0; LANES],
+            t: V::splat(0.0),
+            e: [V::splat(0.0); 3],
+            inv_det: V::splat(0.0),
         };
-        // Uninitialised: (node, lanes) and the lanes' entry distances.
-        let mut stack = [const { MaybeUninit::<(u32, LaneMask)>::uninit() }; STACK];
-        let mut stack_tn = [const { MaybeUninit::<F>::uninit() }; STACK];
+        // Uninitialised: zeroing it per packet would cost more than the
+        // traversal of a small scene. Entries: node and per-lane entry
+        // distance, NaN in lanes that do not need the node.
+        let mut stack = [const { MaybeUninit::<(u32, V)>::uninit() }; STACK];
         let mut sp = 0usize;
         // As in `intersect`, the node being visited is kept out of the stack.
-        let (mut code, mut mask) = (self.root, active);
+        let (mut code, mut mask) = (self.root, M::from_bits(active));
         'visit: loop {
             if code & LEAF != 0 {
                 let leaf = &self.leaves[(code & !LEAF) as usize];
@@ -366,72 +486,65 @@ impl Bvh4 {
                     // at leaf entry as tmax, as the single-ray 4-triangle test.
                     let tmax = best_t;
                     for j in 0..p.n as usize {
-                        let v = [0, 1, 2].map(|i| [0, 1, 2].map(|a| p.v[i][a].as_array()[j]));
-                        let hit = r.triangle(&v, &tmax, mask, &mut h);
-                        let closer = hit & bits(|l| h.t[l] < best_t[l]);
-                        if closer != 0 {
-                            best_t = select(closer, &h.t, &best_t);
-                            for k in 0..3 {
-                                let b: F = std::array::from_fn(|l| h.e[k][l] * h.inv_det[l]);
-                                best_b[k] = select(closer, &b, &best_b[k]);
-                            }
+                        let hit = r.triangle(&vertices(p, j), tmax, mask, &mut h);
+                        let closer = hit & h.t.lt(best_t);
+                        if closer.any() {
+                            best_t = best_t.blend(closer, h.t);
+                            unroll3!(k => {
+                                best_b[k] = best_b[k].blend(closer, h.e[k] * h.inv_det);
+                            });
                             let prim = p.prim[j];
                             for l in 0..LANES {
-                                if closer & (1 << l) != 0 {
-                                    best_prim[l] = prim;
-                                }
+                                let b = best_prim[l];
+                                best_prim[l] = if closer.0[l] != 0 { prim } else { b };
                             }
                         }
                     }
                 }
                 let s = leaf.others as usize;
-                for &prim in &self.others[s..s + leaf.n_others as usize] {
-                    for l in lanes(mask) {
-                        let (tri, d) = r.tri_ray(l);
-                        if let Some(hh) = shapes[prim as usize].intersect_pre(&tri, d, best_t[l])
-                            && hh.t < best_t[l]
-                        {
-                            best_t[l] = hh.t;
-                            for k in 0..3 {
-                                best_b[k][l] = hh.b[k];
+                if leaf.n_others > 0 {
+                    let lanes = mask.bits();
+                    for &prim in &self.others[s..s + leaf.n_others as usize] {
+                        for l in (0..LANES).filter(|l| lanes & (1 << l) != 0) {
+                            let (tri, d) = r.tri_ray(l);
+                            if let Some(hh) =
+                                shapes[prim as usize].intersect_pre(&tri, d, best_t.0[l])
+                                && hh.t < best_t.0[l]
+                            {
+                                best_t.0[l] = hh.t;
+                                unroll3!(k => {
+                                    best_b[k].0[l] = hh.b[k];
+                                });
+                                best_prim[l] = prim;
                             }
-                            best_prim[l] = prim;
                         }
                     }
                 }
             } else {
                 let node = &self.nodes[code as usize];
-                // Hit children, far to near by their nearest lane's entry.
-                let mut kids = [(0usize, 0 as LaneMask, 0.0f32); 4];
-                let mut tns = [[0.0f32; LANES]; 4];
-                let mut nk = 0;
+                // Continue into the first child hit, stack the others with
+                // their lanes' entry distances. (Ordering the children by
+                // their lanes' nearest entry measured slower: with
+                // incoherent rays no order suits most lanes.)
+                let mut next = None;
                 for c in 0..4 {
                     if node.valid & (1 << c) == 0 {
                         continue;
                     }
-                    let (m, tn) = r.child_box(node, c, &best_t);
+                    let (m, tn) = r.child_box(node, c, best_t);
                     let m = m & mask;
-                    if m == 0 {
+                    if !m.any() {
                         continue;
                     }
-                    tns[c] = tn;
-                    let key = min_over(m, &tn);
-                    let mut j = nk;
-                    while j > 0 && kids[j - 1].2 < key {
-                        kids[j] = kids[j - 1];
-                        j -= 1;
-                    }
-                    kids[j] = (c, m, key);
-                    nk += 1;
-                }
-                if nk > 0 {
-                    for &(c, m, _) in &kids[..nk - 1] {
-                        stack[sp].write((node.child[c], m));
-                        stack_tn[sp].write(tns[c]);
+                    if next.is_none() {
+                        next = Some((node.child[c], m));
+                    } else {
+                        stack[sp].write((node.child[c], V::splat(f32::NAN).blend(m, tn)));
                         sp += 1;
                     }
-                    let (c, m, _) = kids[nk - 1];
-                    code = node.child[c];
+                }
+                if let Some((c, m)) = next {
+                    code = c;
                     mask = m;
                     continue 'visit;
                 }
@@ -444,22 +557,21 @@ impl Bvh4 {
                 }
                 sp -= 1;
                 // SAFETY: entries below `sp` were written before being counted.
-                let (c, m) = unsafe { stack[sp].assume_init() };
-                let tn = unsafe { stack_tn[sp].assume_init_ref() };
-                let m = m & bits(|l| tn[l] <= best_t[l]);
-                if m != 0 {
+                let (c, tn) = unsafe { stack[sp].assume_init() };
+                let m = tn.le(best_t);
+                if m.any() {
                     code = c;
                     mask = m;
                     continue 'visit;
                 }
             }
         }
-        for l in lanes(active) {
-            if best_prim[l] != EMPTY {
+        for l in 0..LANES {
+            if active & (1 << l) != 0 && best_prim[l] != EMPTY {
                 out.prim[l] = best_prim[l];
                 out.h[l] = PrimHit {
-                    t: best_t[l],
-                    b: [best_b[0][l], best_b[1][l], best_b[2][l]],
+                    t: best_t.0[l],
+                    b: [best_b[0].0[l], best_b[1].0[l], best_b[2].0[l]],
                 };
             }
         }
@@ -469,18 +581,20 @@ impl Bvh4 {
     /// lane as `unoccluded`).
     #[inline(always)]
     pub fn unoccluded_packet(&self, shapes: &[Shape], rays: &RayPacket) -> LaneMask {
-        let mut free = rays.active & ALL_LANES;
-        if free == 0 {
+        let active = rays.active & ALL_LANES;
+        if active == 0 {
             return 0;
         }
         let r = PacketPre::new(rays);
-        let tmax = &rays.tmax;
+        let tmax = V(rays.tmax);
         let mut h = TriHits {
-            t: [0.0; LANES],
-            e: [[0.0; LANES]; 3],
-            inv_det: [0.0; LANES],
+            t: V::splat(0.0),
+            e: [V::splat(0.0); 3],
+            inv_det: V::splat(0.0),
         };
-        let mut stack = [const { MaybeUninit::<(u32, LaneMask)>::uninit() }; STACK];
+        // Lanes not blocked so far.
+        let mut free = M::from_bits(active);
+        let mut stack = [const { MaybeUninit::<(u32, M)>::uninit() }; STACK];
         let mut sp = 0usize;
         let (mut code, mut mask) = (self.root, free);
         'visit: loop {
@@ -489,27 +603,31 @@ impl Bvh4 {
                 if leaf.packet != EMPTY {
                     let p = &self.packets[leaf.packet as usize];
                     for j in 0..p.n as usize {
-                        let m = mask & free;
-                        if m == 0 {
+                        let hit = r.triangle(&vertices(p, j), tmax, mask, &mut h);
+                        free = free & !hit;
+                        mask = mask & !hit;
+                        if !mask.any() {
                             break;
                         }
-                        let v = [0, 1, 2].map(|i| [0, 1, 2].map(|a| p.v[i][a].as_array()[j]));
-                        free &= !r.triangle(&v, tmax, m, &mut h);
                     }
                 }
                 let s = leaf.others as usize;
-                for &prim in &self.others[s..s + leaf.n_others as usize] {
-                    for l in lanes(mask & free) {
-                        let (tri, d) = r.tri_ray(l);
-                        if shapes[prim as usize]
-                            .intersect_pre(&tri, d, tmax[l])
-                            .is_some()
-                        {
-                            free &= !(1 << l);
+                if leaf.n_others > 0 {
+                    for &prim in &self.others[s..s + leaf.n_others as usize] {
+                        let lanes = mask.bits();
+                        for l in (0..LANES).filter(|l| lanes & (1 << l) != 0) {
+                            let (tri, d) = r.tri_ray(l);
+                            if shapes[prim as usize]
+                                .intersect_pre(&tri, d, tmax.0[l])
+                                .is_some()
+                            {
+                                free.0[l] = 0;
+                                mask.0[l] = 0;
+                            }
                         }
                     }
                 }
-                if free == 0 {
+                if !free.any() {
                     return 0;
                 }
             } else {
@@ -521,7 +639,7 @@ impl Bvh4 {
                         continue;
                     }
                     let m = r.child_box(node, c, tmax).0 & mask;
-                    if m == 0 {
+                    if !m.any() {
                         continue;
                     }
                     if next.is_none() {
@@ -545,14 +663,14 @@ impl Bvh4 {
                 // SAFETY: entries below `sp` were written before being counted.
                 let (c, m) = unsafe { stack[sp].assume_init() };
                 let m = m & free;
-                if m != 0 {
+                if m.any() {
                     code = c;
                     mask = m;
                     continue 'visit;
                 }
             }
         }
-        free
+        free.bits()
     }
 }
 
@@ -575,14 +693,21 @@ mod tests {
     /// Every active lane of the packet queries must equal the single-ray
     /// queries: t and barycentrics bit for bit, the same primitive unless
     /// another lies at exactly the same t; inactive lanes report nothing.
-    fn check(bvh: &Bvh4, shapes: &[Shape], rays: &RayPacket) -> (usize, usize) {
-        let mut out = PacketHits::default();
+    /// The one exception (see the module notes): two primitives within a
+    /// few ulps of each other, where the box test's rounding makes the
+    /// answer depend on the visiting order; then the packet's hit must be
+    /// that primitive's own exact hit. Returns the number of hits, of active
+    /// lanes and of such near ties.
+    fn check(bvh: &Bvh4, shapes: &[Shape], rays: &RayPacket) -> [usize; 3] {
         // Garbage in the previous result must not leak through.
-        out.prim = [7; LANES];
+        let mut out = PacketHits {
+            prim: [7; LANES],
+            ..Default::default()
+        };
         bvh.intersect_packet(shapes, rays, &mut out);
         let free = bvh.unoccluded_packet(shapes, rays);
         assert_eq!(free & !rays.active, 0, "inactive lanes reported free");
-        let (mut hits, mut blocked) = (0, 0);
+        let mut n = [0; 3];
         for l in 0..LANES {
             if rays.active & (1 << l) == 0 {
                 assert_eq!(out.prim[l], EMPTY, "inactive lane {l} reported a hit");
@@ -595,31 +720,39 @@ mod tests {
                 Some((prim, w)) => {
                     let g = out.h[l];
                     assert_ne!(out.prim[l], EMPTY, "lane {l}: missed {o} {d} {tmax}");
-                    assert_eq!(g.t.to_bits(), w.t.to_bits(), "lane {l}: {o} {d} {tmax}");
+                    let bits = |h: &PrimHit| (h.t.to_bits(), h.b.map(f32::to_bits));
                     if out.prim[l] == prim {
-                        for k in 0..3 {
-                            assert_eq!(g.b[k].to_bits(), w.b[k].to_bits(), "lane {l}");
-                        }
+                        assert_eq!(bits(&g), bits(&w), "lane {l}: {o} {d} {tmax}");
                     } else {
-                        // A different primitive at exactly the same t.
-                        let other = shapes[out.prim[l] as usize].intersect(o, d, tmax);
-                        assert_eq!(other.map(|h| h.t.to_bits()), Some(w.t.to_bits()));
+                        // A different primitive: its own hit, at the same t
+                        // or (near tie) within a few ulps.
+                        let own = shapes[out.prim[l] as usize].intersect(o, d, tmax);
+                        assert_eq!(own.map(|h| bits(&h)), Some(bits(&g)), "lane {l}");
+                        if g.t != w.t {
+                            assert!(
+                                (g.t - w.t).abs() <= 1e-6 * w.t,
+                                "lane {l}: {o} {d} {tmax}: {} against {}",
+                                g.t,
+                                w.t
+                            );
+                            n[2] += 1;
+                        }
                     }
-                    hits += 1;
+                    n[0] += 1;
                 }
             }
             let u = bvh.unoccluded(shapes, o, d, tmax);
             assert_eq!(free & (1 << l) != 0, u, "lane {l}: {o} {d} {tmax}");
-            blocked += usize::from(!u);
+            n[1] += 1;
         }
-        (hits, blocked)
+        n
     }
 
     /// Packets of several kinds over `shapes` inside about [-1, 1]³.
-    fn packets(shapes: &[Shape], bvh: &Bvh4, seed: u64, n: usize) -> (usize, usize) {
+    fn packets(shapes: &[Shape], bvh: &Bvh4, seed: u64, n: usize) -> [usize; 3] {
         let mut rng = Rng::for_sample(seed, 0, 0);
         let mut v = || Vec3::new(rng.uniform(), rng.uniform(), rng.uniform()) * 2.0 - 1.0;
-        let (mut hits, mut blocked) = (0, 0);
+        let mut counts = [0; 3];
         for i in 0..n {
             let mut rays = RayPacket {
                 // Garbage (NaN) in lanes left inactive.
@@ -659,11 +792,12 @@ mod tests {
                     rays.set(l, o, d, tmax);
                 }
             }
-            let (h, b) = check(bvh, shapes, &rays);
-            hits += h;
-            blocked += b;
+            let c = check(bvh, shapes, &rays);
+            for k in 0..3 {
+                counts[k] += c[k];
+            }
         }
-        (hits, blocked)
+        counts
     }
 
     #[test]
@@ -690,11 +824,12 @@ mod tests {
                 });
             }
             let bvh = Bvh4::build(&shapes).expect("shallow tree");
-            let (hits, blocked) = packets(&shapes, &bvh, seed, 1500);
+            let [hits, n, ties] = packets(&shapes, &bvh, seed, 1500);
             assert!(
-                hits > 8_000 && blocked > 4_000,
-                "test rays too easy: {hits} {blocked}"
+                hits > n / 10 && n - hits > n / 10,
+                "test rays too easy: {hits} of {n}"
             );
+            assert!(ties <= n / 1000, "{ties} near ties in {n} rays");
         }
     }
 
@@ -703,12 +838,16 @@ mod tests {
         let world = cornell();
         let shapes = &world.accel.shapes;
         let bvh = Bvh4::build(shapes).expect("shallow tree");
-        let (hits, blocked) = packets(shapes, &bvh, 3, 1500);
-        assert!(hits > 10_000 && blocked > 5_000, "{hits} {blocked}");
-        // Path-traced bounces and shadow rays, as the renderer casts them.
+        // Random rays, some starting inside the boxes, whose bottoms lie in
+        // the floor's plane: near ties between coplanar faces.
+        let [hits, n, ties] = packets(shapes, &bvh, 3, 1500);
+        assert!(hits > n / 10 && n - hits > n / 10, "{hits} of {n}");
+        assert!(ties <= n / 1000, "{ties} near ties in {n} rays");
+        // Path-traced bounces and shadow rays, as the renderer casts them:
+        // no near ties there.
         let (sec, shadow) = bounce_rays(&world, &bvh, 3000);
         for rays in sec.iter().chain(&shadow) {
-            check(&bvh, shapes, rays);
+            assert_eq!(check(&bvh, shapes, rays)[2], 0);
         }
     }
 
