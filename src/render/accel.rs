@@ -130,8 +130,9 @@ impl Accel {
 
     /// Closest hits of every active lane of `rays`: lane `l` of `out` is
     /// `intersect` of ray `l` (same primitive and same bits of t and the
-    /// barycentrics; between primitives at exactly the same t either may be
-    /// reported). Inactive lanes report no hit.
+    /// barycentrics; between primitives at exactly the same t, or within a
+    /// few ulps of it on coplanar overlapping faces, either may be reported:
+    /// `bvh4_packet.rs`). Inactive lanes report no hit.
     #[inline(always)]
     pub fn intersect_packet(&self, rays: &RayPacket, out: &mut PacketHits) {
         if let Tree::Four(b) = &self.tree {

@@ -533,15 +533,22 @@ pub fn run(o: &BenchOptions) -> Result<String> {
     }
     let (timed, cpu) = timed.expect("rendered");
     let y = luminance_y(&timed);
-    let isa = super::simd::RenderIsa::detect().name();
+    let kernel = super::film::Kernel::detect();
+    let isa = kernel.isa.name();
     out += &format!("render kernel: {isa}\n");
+    out += if kernel.packets {
+        "render paths: 16 at a time (CAMSIM_RENDER_PACKETS=1)\n"
+    } else {
+        "render paths: one at a time\n"
+    };
     let mut kv = format!(
-        "camsim-bench spp={} wall_s={:.4} cpu_s={:.4} paths_per_s={:.1} mean_y={:.6} render_isa={isa} batches={} sampler={}",
+        "camsim-bench spp={} wall_s={:.4} cpu_s={:.4} paths_per_s={:.1} mean_y={:.6} render_isa={isa} packets={} batches={} sampler={}",
         o.spp,
         timed.render_s,
         cpu,
         paths / timed.render_s,
         mean(&y),
+        kernel.packets,
         settings.batches.clamp(1, o.spp),
         o.sampler.name()
     );

@@ -1,7 +1,7 @@
 //! The film: pixel sampling, camera weights, batch statistics, labels and
 //! depth, parallel over image rows with per-pixel seeding.
 
-use super::integrator::{PacketScratch, PathState, first_hit, trace_packet};
+use super::integrator::{PacketScratch, PathState, Scratch, first_hit, trace, trace_packet};
 use super::ray_packet::{LANES, LaneMask};
 use super::sampler::{BatchScramble, Sampler, SamplerKind};
 use super::sampling::Rng;
@@ -53,14 +53,41 @@ pub fn render_world(
     s: &RenderSettings,
     label_names: Vec<String>,
 ) -> Result<OpticalImage> {
-    let isa = RenderIsa::detect();
-    render_world_at(isa, world, camera, to_world, film, s, label_names)
+    render_world_at(
+        Kernel::detect(),
+        world,
+        camera,
+        to_world,
+        film,
+        s,
+        label_names,
+    )
 }
 
-/// `render_world` with the kernel compiled for `isa` (the baseline when
-/// this CPU lacks it).
+/// How the row kernel runs: its instruction set and whether a pixel's paths
+/// are traced 16 at a time (`packets`) or one by one. Every choice renders
+/// the same bits.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Kernel {
+    pub isa: RenderIsa,
+    pub packets: bool,
+}
+
+impl Kernel {
+    /// The widest instruction set of this machine (`RenderIsa::detect`) and
+    /// `CAMSIM_RENDER_PACKETS` (`packets_enabled`).
+    pub fn detect() -> Self {
+        Kernel {
+            isa: RenderIsa::detect(),
+            packets: packets_enabled(),
+        }
+    }
+}
+
+/// `render_world` with `kernel` (compiled for its instruction set; the
+/// baseline when this CPU lacks it).
 pub fn render_world_at(
-    isa: RenderIsa,
+    kernel: Kernel,
     world: &World,
     camera: &dyn Camera,
     to_world: &DMat4,
@@ -138,8 +165,9 @@ pub fn render_world_at(
         dispersive_cam,
         mid_nm,
         wsets: &wsets,
+        packets: kernel.packets,
     };
-    let work = |r: RowSlices| job.row_at(isa, r);
+    let work = |r: RowSlices| job.row_at(kernel.isa, r);
 
     let run = |img: &mut OpticalImage| -> Vec<(u64, Vec<f32>)> {
         img.irradiance
@@ -169,6 +197,29 @@ pub fn render_world_at(
     Ok(img)
 }
 
+/// Add a finished path's radiance `l`, scaled by the camera weight, to its
+/// batch total `acc`; a path with a non-finite band is dropped and counted
+/// (returns 1).
+#[inline(always)]
+fn accumulate(acc: &mut [f64], l: &[f32], weight: f64) -> u64 {
+    if l.iter().any(|x| !x.is_finite()) {
+        return 1;
+    }
+    for (x, &l) in acc.iter_mut().zip(l) {
+        *x += l as f64 * weight;
+    }
+    0
+}
+
+/// Trace a pixel's samples 16 paths at a time (`integrator::trace_packet`,
+/// packet traversal) instead of one by one: `CAMSIM_RENDER_PACKETS=1`. Same
+/// image bits either way. Off by default: on the bench's Cornell box it
+/// measured ≈ 5 % slower (README, *Performance by machine*).
+pub fn packets_enabled() -> bool {
+    static P: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *P.get_or_init(|| std::env::var("CAMSIM_RENDER_PACKETS").is_ok_and(|v| v == "1"))
+}
+
 /// What every row of one render shares.
 struct RowJob<'a> {
     world: &'a World,
@@ -181,6 +232,8 @@ struct RowJob<'a> {
     dispersive_cam: bool,
     mid_nm: f64,
     wsets: &'a [&'a [f32]],
+    /// Trace a pixel's paths 16 at a time (`trace_packet`).
+    packets: bool,
 }
 
 impl RowJob<'_> {
@@ -212,6 +265,66 @@ impl RowJob<'_> {
         self.row(r)
     }
 
+    /// Start sample `j` of batch `bi` of pixel (`px`, `py`): its sampler
+    /// (point j of the batch's scrambled Sobol copies, so the batch's film
+    /// positions are stratified over the pixel; sampler.rs), its camera ray
+    /// and initial throughput in `beta`. `None`: the camera vignettes it.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn start_sample(
+        &self,
+        px: u32,
+        py: u32,
+        pixel_key: u64,
+        scrambles: &[BatchScramble],
+        (bi, j): (u32, u32),
+        smp: &mut Sampler,
+        beta: &mut [f32],
+    ) -> Option<(PathState, f64)> {
+        let (world, film, s) = (self.world, self.film, self.s);
+        let nb = world.bands;
+        let (fw, fh, pitch) = (
+            film.width_px as f64,
+            film.height_px as f64,
+            film.pixel_pitch_m,
+        );
+        // Samples of batch `bi` are si = bi, bi + batches, … (the same
+        // split and accumulation order as a plain round-robin loop).
+        let si = bi as u64 + j as u64 * self.batches as u64;
+        *smp = Sampler::for_sample(scrambles.get(bi as usize), pixel_key, j, si);
+        let (fx, fy) = smp.get2d();
+        let (ua, ub) = smp.get2d();
+        let film_m = DVec2::new(
+            (px as f64 + fx as f64 - fw / 2.0) * pitch,
+            (fh / 2.0 - (py as f64 + fy as f64)) * pitch,
+        );
+        let (hero, lambda) = if self.dispersive_cam {
+            let b = ((smp.get1d() * nb as f32) as usize).min(nb - 1);
+            (Some(b), s.grid.wavelength(b))
+        } else {
+            (None, self.mid_nm)
+        };
+        let (o, d, weight) = camera_ray(
+            self.camera,
+            self.to_world,
+            film_m,
+            DVec2::new(ua as f64, ub as f64),
+            lambda,
+        )?;
+        match hero {
+            Some(b) => beta
+                .iter_mut()
+                .enumerate()
+                .for_each(|(j, x)| *x = if j == b { nb as f32 } else { 0.0 }),
+            // Padding bands (≥ nb) carry no throughput.
+            None => {
+                beta[..nb].fill(1.0);
+                beta[nb..].fill(0.0);
+            }
+        }
+        Some((PathState::camera(o, d, hero), weight))
+    }
+
     /// One image row: every sample of every pixel, then the pixel means and
     /// standard errors. Returns the non-finite sample count and the weighted
     /// standard errors.
@@ -225,12 +338,12 @@ impl RowJob<'_> {
             s,
             roi,
             batches,
-            dispersive_cam,
             mid_nm,
             wsets,
+            packets,
+            ..
         } = *self;
         let nb = world.bands;
-        let grid = &s.grid;
         let nsets = wsets.len();
         let (fw, fh, pitch) = (
             film.width_px as f64,
@@ -247,7 +360,8 @@ impl RowJob<'_> {
         ];
         let py = roi.y + row as u32;
         let nbp = world.bands_padded;
-        let mut sc = PacketScratch::new(nbp);
+        let mut sc = Scratch::new(nbp);
+        let mut psc = PacketScratch::new(if packets { nbp } else { 0 });
         // Batch bi holds samples bi, bi + batches, …: (spp − bi)/batches of them.
         let batch_len = |bi: usize| (s.spp as usize - bi).div_ceil(batches);
         // (batch, index in batch) of the pixel's samples in accumulation order.
@@ -288,73 +402,47 @@ impl RowJob<'_> {
                     (0..batches).map(|bi| BatchScramble::new(pixel_key, bi as u64, batch_len(bi))),
                 );
             }
-            // The pixel's samples in batch order, LANES paths traced together.
-            for chunk in order.chunks(LANES) {
-                let mut alive: LaneMask = 0;
-                for (lane, &(bi, j)) in chunk.iter().enumerate() {
-                    let (bi, j) = (bi as usize, j as usize);
-                    // Samples of batch `bi` are si = bi, bi + batches, … (the same
-                    // split and accumulation order as a plain round-robin loop).
-                    let si = bi + j * batches;
-                    counts[bi] += 1;
-                    // Sample j of batch bi: its film position, lens position
-                    // and every path draw are point j of the batch's
-                    // scrambled Sobol copies (sampler.rs), so the batch's
-                    // film positions are stratified over the pixel.
-                    smps[lane] =
-                        Sampler::for_sample(scrambles.get(bi), pixel_key, j as u32, si as u64);
-                    let smp = &mut smps[lane];
-                    let (fx, fy) = smp.get2d();
-                    let (ua, ub) = smp.get2d();
-                    let film_m = DVec2::new(
-                        (px as f64 + fx as f64 - fw / 2.0) * pitch,
-                        (fh / 2.0 - (py as f64 + fy as f64)) * pitch,
-                    );
-                    let (hero, lambda) = if dispersive_cam {
-                        let b = ((smp.get1d() * nb as f32) as usize).min(nb - 1);
-                        (Some(b), grid.wavelength(b))
-                    } else {
-                        (None, mid_nm)
-                    };
-                    let Some((o, d, weight)) = camera_ray(
-                        camera,
-                        to_world,
-                        film_m,
-                        DVec2::new(ua as f64, ub as f64),
-                        lambda,
-                    ) else {
-                        continue;
-                    };
-                    let beta = &mut sc.beta[lane * nbp..(lane + 1) * nbp];
-                    match hero {
-                        Some(b) => beta
-                            .iter_mut()
-                            .enumerate()
-                            .for_each(|(j, x)| *x = if j == b { nb as f32 } else { 0.0 }),
-                        // Padding bands (≥ nb) carry no throughput.
-                        None => {
-                            beta[..nb].fill(1.0);
-                            beta[nb..].fill(0.0);
+            if packets {
+                // The pixel's samples in batch order, LANES paths traced together.
+                for chunk in order.chunks(LANES) {
+                    let mut alive: LaneMask = 0;
+                    for (lane, &(bi, j)) in chunk.iter().enumerate() {
+                        counts[bi as usize] += 1;
+                        let beta = &mut psc.beta[lane * nbp..(lane + 1) * nbp];
+                        if let Some((st, w)) = self.start_sample(
+                            px,
+                            py,
+                            pixel_key,
+                            &scrambles,
+                            (bi, j),
+                            &mut smps[lane],
+                            beta,
+                        ) {
+                            paths[lane] = st;
+                            weights[lane] = w;
+                            alive |= 1 << lane;
                         }
                     }
-                    paths[lane] = PathState::camera(o, d, hero);
-                    weights[lane] = weight;
-                    alive |= 1 << lane;
+                    trace_packet(world, &mut paths, alive, s.max_bounces, &mut smps, &mut psc);
+                    // Accumulate in sample order.
+                    for (lane, &(bi, _)) in chunk.iter().enumerate() {
+                        if alive & (1 << lane) != 0 {
+                            let l = &psc.l[lane * nbp..lane * nbp + nb];
+                            let a = &mut acc[bi as usize * nb..(bi as usize + 1) * nb];
+                            nan += accumulate(a, l, weights[lane]);
+                        }
+                    }
                 }
-                trace_packet(world, &mut paths, alive, s.max_bounces, &mut smps, &mut sc);
-                // Accumulate in sample order.
-                for (lane, &(bi, _)) in chunk.iter().enumerate() {
-                    if alive & (1 << lane) == 0 {
-                        continue;
-                    }
-                    let l = &sc.l[lane * nbp..lane * nbp + nb];
-                    if l.iter().any(|x| !x.is_finite()) {
-                        nan += 1;
-                        continue;
-                    }
-                    let a = &mut acc[bi as usize * nb..(bi as usize + 1) * nb];
-                    for (x, &l) in a.iter_mut().zip(l) {
-                        *x += l as f64 * weights[lane];
+            } else {
+                for &(bi, j) in &order {
+                    counts[bi as usize] += 1;
+                    let smp = &mut smps[0];
+                    if let Some((st, w)) =
+                        self.start_sample(px, py, pixel_key, &scrambles, (bi, j), smp, &mut sc.beta)
+                    {
+                        trace(world, st.o, st.d, s.max_bounces, st.hero, smp, &mut sc);
+                        let a = &mut acc[bi as usize * nb..(bi as usize + 1) * nb];
+                        nan += accumulate(a, &sc.l[..nb], w);
                     }
                 }
             }
@@ -408,10 +496,13 @@ mod tests {
     use crate::render::BvhKind;
     use crate::render::bench::mitsuba_cornell_box;
 
-    /// Every instruction set level this machine has renders the same image
-    /// bit for bit (irradiance, standard errors, labels, depth): the levels
-    /// do the same IEEE operations in the same order (`simd.rs`). The
-    /// Cornell box exercises diffuse and area-light paths, roulette and MIS.
+    /// Every instruction set level this machine has, with paths traced one by
+    /// one or 16 at a time, renders the same image bit for bit (irradiance,
+    /// standard errors, labels, depth): the levels do the same IEEE
+    /// operations in the same order (`simd.rs`), and a path in a packet the
+    /// same operations as alone (`integrator::trace_packet`). The Cornell box
+    /// exercises diffuse and area-light paths, roulette and MIS; 8 spp in 3
+    /// batches leaves packets partly empty.
     #[test]
     fn every_isa_level_renders_the_same_bits() {
         let (scene, film) = mitsuba_cornell_box();
@@ -419,14 +510,16 @@ mod tests {
         let to_world = scene.camera.as_ref().map(|c| c.to_world).unwrap();
         let s = RenderSettings {
             spp: 8,
+            batches: 3,
             threads: 2,
             roi: Some(Rect::new(96, 16, 48, 48)),
             ..Default::default()
         };
         let world = World::build(&scene, &s.grid, BvhKind::Bvh4).unwrap();
-        let levels: Vec<RenderIsa> = RenderIsa::ALL
+        let levels: Vec<Kernel> = RenderIsa::ALL
             .into_iter()
             .filter(|l| l.supported())
+            .flat_map(|isa| [false, true].map(|packets| Kernel { isa, packets }))
             .collect();
         let imgs: Vec<OpticalImage> = levels
             .iter()

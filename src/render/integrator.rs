@@ -148,7 +148,7 @@ pub fn escape(world: &World, st: &PathState, beta: &[f32], l: &mut [f32]) {
 /// result as testing it here.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-pub fn scatter(
+pub fn scatter<const DEFER: bool>(
     world: &World,
     st: &mut PathState,
     hit: &Hit,
@@ -263,7 +263,18 @@ pub fn scatter(
                     tmax: f32::INFINITY,
                 }),
             };
-            if shadow.is_some() {
+            // Tested here (one path: the BSDF is evaluated for unblocked
+            // rays only) or later by the caller with the packet's other
+            // shadow rays (`DEFER`: the contribution waits in `pend`).
+            let contributes = match shadow {
+                None => false,
+                Some(r) if !DEFER => {
+                    shadow = None;
+                    world.accel.unoccluded(r.o, r.d, r.tmax)
+                }
+                Some(_) => true,
+            };
+            if contributes {
                 let pdf_b = bsdf.eval(wo, wi, f);
                 let w = if ls.delta {
                     1.0
@@ -271,10 +282,18 @@ pub fn scatter(
                     power_heuristic(ls.pdf, pdf_b)
                 };
                 let s = wi.z * w * ls.scale / ls.pdf;
-                for (((o, &b), &f), &e) in
-                    pend.iter_mut().zip(beta.iter()).zip(f.iter()).zip(ls.spec)
-                {
-                    *o = b * f * e * s;
+                if DEFER {
+                    for (((o, &b), &f), &e) in
+                        pend.iter_mut().zip(beta.iter()).zip(f.iter()).zip(ls.spec)
+                    {
+                        *o = b * f * e * s;
+                    }
+                } else {
+                    for (((o, &b), &f), &e) in
+                        l.iter_mut().zip(beta.iter()).zip(f.iter()).zip(ls.spec)
+                    {
+                        *o += b * f * e * s;
+                    }
                 }
             }
         }
@@ -354,7 +373,7 @@ pub fn trace(
             escape(world, &st, &sc.beta, &mut sc.l);
             break;
         };
-        let (shadow, alive) = scatter(
+        let (_, alive) = scatter::<false>(
             world,
             &mut st,
             &hit,
@@ -365,11 +384,6 @@ pub fn trace(
             &mut sc.f,
             &mut sc.pend,
         );
-        if let Some(r) = shadow
-            && world.accel.unoccluded(r.o, r.d, r.tmax)
-        {
-            add_pending(&mut sc.l, &sc.pend);
-        }
         if !alive {
             break;
         }
@@ -437,7 +451,7 @@ pub fn trace_packet(
                 prim: hits.prim[i],
                 h: hits.h[i],
             };
-            let (shadow, go_on) = scatter(
+            let (shadow, go_on) = scatter::<true>(
                 world,
                 &mut st[i],
                 &hit,

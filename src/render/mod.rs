@@ -66,6 +66,7 @@ pub mod bvh4_packet;
 pub mod film;
 pub mod geometry;
 pub mod integrator;
+mod lanes;
 pub mod output;
 pub mod ray_packet;
 pub mod sampler;
