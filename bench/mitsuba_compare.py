@@ -132,6 +132,8 @@ def mitsuba_reference(mi, dr, scene, spp, batches, pass_spp, cache):
 CAMSIM_CPU = []
 # The render kernel level camsim ran (`render_isa=` of its bench line; CAMSIM_RENDER_ISA lowers it).
 CAMSIM_ISA = []
+# Whether camsim traced 16 paths at a time (`packets=` of its bench line; CAMSIM_RENDER_PACKETS=1).
+CAMSIM_PACKETS = []
 
 
 def machine_cpu():
@@ -162,6 +164,7 @@ def run_camsim(camsim, spp, seed, y_out, threads):
     kv_line = [line for line in out.splitlines() if line.startswith("camsim-bench ")][-1]
     kv = dict(re.findall(r"(\w+)=(\S+)", kv_line))
     CAMSIM_ISA.append(kv.get("render_isa", "?"))
+    CAMSIM_PACKETS.append(kv.get("packets", "false") == "true")
     return read_pfm(y_out), float(kv["wall_s"]), float(kv["cpu_s"])
 
 
@@ -308,7 +311,8 @@ def main():
     print(f"RATIO camsim/Mitsuba: paths/s {pps_c / (paths / tm):.3f} (wall), {cm / cc:.3f} (CPU); "
           f"equal-time RMSE {res[k_all][1]:.3f} (wall), {res[k_all][2]:.3f} (CPU); "
           f"light transport only {res[k_lt][1]:.3f} (wall); equal-spp RMSE {res[k_all][0]:.3f}  [RMSE < 1 = camsim better]; "
-          f"CPU {machine_cpu()}, camsim kernel {CAMSIM_ISA[-1] if CAMSIM_ISA else '?'}, "
+          f"CPU {machine_cpu()}, camsim kernel {CAMSIM_ISA[-1] if CAMSIM_ISA else '?'} "
+          f"({'16 paths at a time' if CAMSIM_PACKETS and CAMSIM_PACKETS[-1] else 'one path at a time'}), "
           f"camsim sampler {a.sampler} in {a.batches} batch(es), load {os.getloadavg()[0]:.1f}")
     with open(os.path.join(a.cache, "last_result.json"), "w") as f:
         json.dump({"load_average": os.getloadavg()[0], "cpu": machine_cpu(),

@@ -39,6 +39,15 @@
 //! - Instruction set: the row kernel runs at the widest level of the CPU
 //!   (`simd::RenderIsa`: sse, avx2+fma, avx512f; `CAMSIM_RENDER_ISA` lowers
 //!   it), with the same bits at every level.
+//! - Paths one at a time or in packets (`film::Kernel`): by default each path
+//!   is traced alone (`integrator::trace`); `CAMSIM_RENDER_PACKETS=1` traces
+//!   a pixel's samples 16 at a time (`integrator::trace_packet`): each bounce
+//!   casts the live paths' rays as one `RayPacket` through the packet
+//!   traversal (`bvh4_packet.rs`, SIMD across rays), shades each path, then
+//!   casts their shadow rays as one packet. Both render the same bits; one
+//!   bounce is one function (`integrator::scatter`) for both. On the bench's
+//!   36-triangle box the packets are not yet faster (README, *Performance by
+//!   machine*): shading is still per path, and lanes empty as paths end.
 //! - Light selection: proportional to power, each emitting light at least
 //!   10⁻³/N (`world::selection_pmf`).
 //! - Performance: `bench/mitsuba_compare.sh` (Mitsuba `cornell_box()`, 256²,
