@@ -3,7 +3,7 @@
 //! notes) and the closest-hit query the integrator asks of it.
 
 use super::geometry::{PrimHit, Shape, TriRay};
-use super::ray_packet::{LaneMask, PacketHits, RayPacket};
+use super::ray_packet::{LaneMask, PacketHits, RayPacket, for_lanes};
 use glam::{Vec3, Vec3A};
 use obvhs::{BvhBuildParams, bvh2::Bvh2, cwbvh::CwBvh, ray::Ray, ray::RayHit};
 
@@ -139,16 +139,13 @@ impl Accel {
             return b.intersect_packet(&self.shapes, rays, out);
         }
         *out = PacketHits::default();
-        let mut m = rays.active;
-        while m != 0 {
-            let l = m.trailing_zeros() as usize;
-            m &= m - 1;
+        for_lanes(rays.active, |l| {
             let (o, d, tmax) = rays.get(l);
             if let Some(h) = self.intersect(o, d, tmax) {
                 out.prim[l] = h.prim;
                 out.h[l] = h.h;
             }
-        }
+        });
     }
 
     /// The active lanes of `rays` along which nothing blocks the ray (each
@@ -158,16 +155,13 @@ impl Accel {
         if let Tree::Four(b) = &self.tree {
             return b.unoccluded_packet(&self.shapes, rays);
         }
-        let mut m = rays.active;
         let mut free = 0;
-        while m != 0 {
-            let l = m.trailing_zeros() as usize;
-            m &= m - 1;
+        for_lanes(rays.active, |l| {
             let (o, d, tmax) = rays.get(l);
             if self.unoccluded(o, d, tmax) {
                 free |= 1 << l;
             }
-        }
+        });
         free
     }
 }

@@ -501,10 +501,40 @@ impl Bvh4 {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
     use crate::render::sampling::Rng;
     use glam::Vec3;
+
+    /// A point uniform in [−1, 1]³.
+    pub(in crate::render) fn point(rng: &mut Rng) -> Vec3 {
+        Vec3::new(rng.uniform(), rng.uniform(), rng.uniform()) * 2.0 - 1.0
+    }
+
+    /// A test scene for the traversals: 300 random triangles (edges up to
+    /// ≈ 0.5) in [−1, 1]³ with 10 spheres and 10 disks among them.
+    pub(in crate::render) fn soup(rng: &mut Rng) -> Vec<Shape> {
+        let mut v = || point(rng);
+        let mut shapes = Vec::new();
+        for _ in 0..300 {
+            let c = v();
+            shapes.push(Shape::Triangle {
+                p: [c, c + v() * 0.3, c + v() * 0.3],
+            });
+        }
+        for _ in 0..10 {
+            shapes.push(Shape::Sphere {
+                center: v(),
+                radius: 0.1,
+            });
+            shapes.push(Shape::Disk {
+                center: v(),
+                normal: v().normalize(),
+                radius: 0.1,
+            });
+        }
+        shapes
+    }
 
     fn brute(shapes: &[Shape], o: Vec3, d: Vec3, tmax: f32) -> Option<(u32, f32)> {
         let mut best: Option<(u32, f32)> = None;
@@ -525,25 +555,8 @@ mod tests {
     #[test]
     fn bvh4_agrees_with_brute_force() {
         let mut rng = Rng::for_sample(7, 0, 0);
-        let mut v = || Vec3::new(rng.uniform(), rng.uniform(), rng.uniform()) * 2.0 - 1.0;
-        let mut shapes = Vec::new();
-        for _ in 0..300 {
-            let c = v();
-            shapes.push(Shape::Triangle {
-                p: [c, c + v() * 0.3, c + v() * 0.3],
-            });
-        }
-        for _ in 0..10 {
-            shapes.push(Shape::Sphere {
-                center: v(),
-                radius: 0.1,
-            });
-            shapes.push(Shape::Disk {
-                center: v(),
-                normal: v().normalize(),
-                radius: 0.1,
-            });
-        }
+        let shapes = soup(&mut rng);
+        let mut v = || point(&mut rng);
         let bvh = Bvh4::build(&shapes).expect("shallow tree");
         let (mut hits, mut blocked) = (0, 0);
         for i in 0..20_000 {

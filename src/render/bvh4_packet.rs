@@ -607,25 +607,7 @@ mod tests {
     fn packet_agrees_with_single_ray_on_soups() {
         for seed in [7, 8] {
             let mut rng = Rng::for_sample(seed, 1, 0);
-            let mut v = || Vec3::new(rng.uniform(), rng.uniform(), rng.uniform()) * 2.0 - 1.0;
-            let mut shapes = Vec::new();
-            for _ in 0..300 {
-                let c = v();
-                shapes.push(Shape::Triangle {
-                    p: [c, c + v() * 0.3, c + v() * 0.3],
-                });
-            }
-            for _ in 0..10 {
-                shapes.push(Shape::Sphere {
-                    center: v(),
-                    radius: 0.1,
-                });
-                shapes.push(Shape::Disk {
-                    center: v(),
-                    normal: v().normalize(),
-                    radius: 0.1,
-                });
-            }
+            let shapes = super::super::bvh4::tests::soup(&mut rng);
             let bvh = Bvh4::build(&shapes).expect("shallow tree");
             let [hits, n, ties] = packets(&shapes, &bvh, seed, 1500);
             assert!(

@@ -12,7 +12,7 @@
 
 use super::accel::Hit;
 use super::geometry::offset_ray_origin;
-use super::ray_packet::{LANES, LaneMask, PacketHits, RayPacket};
+use super::ray_packet::{LANES, LaneMask, PacketHits, RayPacket, for_lanes};
 use super::sampler::Sampler;
 use super::sampling::{Frame, power_heuristic};
 use super::world::{LightKind, World};
@@ -28,7 +28,6 @@ pub struct Scratch {
     pub beta: Vec<f32>,
     pub l: Vec<f32>,
     f: Vec<f32>,
-    pend: Vec<f32>,
 }
 
 impl Scratch {
@@ -37,7 +36,6 @@ impl Scratch {
             beta: vec![0.0; nb],
             l: vec![0.0; nb],
             f: vec![0.0; nb],
-            pend: vec![0.0; nb],
         }
     }
 }
@@ -139,16 +137,17 @@ pub fn escape(world: &World, st: &PathState, beta: &[f32], l: &mut [f32]) {
 }
 
 /// One bounce at the hit `hit` of the path's ray: emission into `l`, the
-/// next-event estimate (its contribution written to `pend`, its shadow ray
-/// returned), BSDF sampling and Russian roulette into `st` and `beta`.
-/// Returns the shadow ray (if any) and whether the path goes on. `f` is
-/// scratch. The draws are taken in the same order whatever happens, so the
-/// caller may test the shadow ray later, alone or in a packet: adding `pend`
-/// to `l` when it is unblocked, before the path's next hit, gives the same
-/// result as testing it here.
+/// next-event estimate, BSDF sampling and Russian roulette into `st` and
+/// `beta`. Returns the shadow ray still to test (if any) and whether the path
+/// goes on. `f` is scratch. With `pend = None` the shadow ray is tested here
+/// and an unblocked light's contribution added to `l`; with `Some` it is
+/// written to `pend` and the ray returned, for the caller to test later, in a
+/// packet: the draws are taken in the same order whatever happens, so adding
+/// `pend` to `l` when the ray is unblocked, before the path's next hit, gives
+/// the same result.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-pub fn scatter<const DEFER: bool>(
+pub fn scatter(
     world: &World,
     st: &mut PathState,
     hit: &Hit,
@@ -157,7 +156,7 @@ pub fn scatter<const DEFER: bool>(
     beta: &mut [f32],
     l: &mut [f32],
     f: &mut [f32],
-    pend: &mut [f32],
+    pend: Option<&mut [f32]>,
 ) -> (Option<ShadowRay>, bool) {
     let nb = world.bands;
     let (o, d) = (st.o, st.d);
@@ -265,10 +264,10 @@ pub fn scatter<const DEFER: bool>(
             };
             // Tested here (one path: the BSDF is evaluated for unblocked
             // rays only) or later by the caller with the packet's other
-            // shadow rays (`DEFER`: the contribution waits in `pend`).
+            // shadow rays (the contribution waits in `pend`).
             let contributes = match shadow {
                 None => false,
-                Some(r) if !DEFER => {
+                Some(r) if pend.is_none() => {
                     shadow = None;
                     world.accel.unoccluded(r.o, r.d, r.tmax)
                 }
@@ -282,7 +281,7 @@ pub fn scatter<const DEFER: bool>(
                     power_heuristic(ls.pdf, pdf_b)
                 };
                 let s = wi.z * w * ls.scale / ls.pdf;
-                if DEFER {
+                if let Some(pend) = pend {
                     for (((o, &b), &f), &e) in
                         pend.iter_mut().zip(beta.iter()).zip(f.iter()).zip(ls.spec)
                     {
@@ -373,7 +372,7 @@ pub fn trace(
             escape(world, &st, &sc.beta, &mut sc.l);
             break;
         };
-        let (_, alive) = scatter::<false>(
+        let (_, alive) = scatter(
             world,
             &mut st,
             &hit,
@@ -382,7 +381,7 @@ pub fn trace(
             &mut sc.beta,
             &mut sc.l,
             &mut sc.f,
-            &mut sc.pend,
+            None,
         );
         if !alive {
             break;
@@ -437,21 +436,18 @@ pub fn trace_packet(
         for_lanes(alive, |i| rays.set(i, st[i].o, st[i].d, f32::INFINITY));
         world.accel.intersect_packet(&rays, &mut hits);
         shadows.active = 0;
-        let mut m = alive;
-        while m != 0 {
-            let i = m.trailing_zeros() as usize;
-            m &= m - 1;
+        for_lanes(alive, |i| {
             let span = i * n..(i + 1) * n;
             if hits.prim[i] == u32::MAX {
                 escape(world, &st[i], &sc.beta[span.clone()], &mut sc.l[span]);
                 alive &= !(1 << i);
-                continue;
+                return;
             }
             let hit = Hit {
                 prim: hits.prim[i],
                 h: hits.h[i],
             };
-            let (shadow, go_on) = scatter::<true>(
+            let (shadow, go_on) = scatter(
                 world,
                 &mut st[i],
                 &hit,
@@ -460,7 +456,7 @@ pub fn trace_packet(
                 &mut sc.beta[span.clone()],
                 &mut sc.l[span.clone()],
                 &mut sc.f,
-                &mut sc.pend[span],
+                Some(&mut sc.pend[span]),
             );
             if let Some(r) = shadow {
                 shadows.set(i, r.o, r.d, r.tmax);
@@ -468,23 +464,13 @@ pub fn trace_packet(
             if !go_on {
                 alive &= !(1 << i);
             }
-        }
+        });
         if shadows.active != 0 {
             let free = world.accel.unoccluded_packet(&shadows);
             for_lanes(free, |i| {
                 add_pending(&mut sc.l[i * n..(i + 1) * n], &sc.pend[i * n..(i + 1) * n])
             });
         }
-    }
-}
-
-/// Call `f` for each lane set in `m`, lowest first.
-#[inline(always)]
-fn for_lanes(mut m: LaneMask, mut f: impl FnMut(usize)) {
-    while m != 0 {
-        let i = m.trailing_zeros() as usize;
-        m &= m - 1;
-        f(i);
     }
 }
 

@@ -20,6 +20,16 @@ pub type LaneMask = u32;
 /// Every lane set.
 pub const ALL_LANES: LaneMask = (1 << LANES) - 1;
 
+/// Call `f` for each lane set in `m`, lowest first.
+#[inline(always)]
+pub fn for_lanes(mut m: LaneMask, mut f: impl FnMut(usize)) {
+    while m != 0 {
+        let l = m.trailing_zeros() as usize;
+        m &= m - 1;
+        f(l);
+    }
+}
+
 /// Up to `LANES` rays `o + t·d`, t ∈ (0, tmax).
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
