@@ -4,6 +4,7 @@
 
 use super::geometry::{PrimHit, Shape, TriRay};
 use super::ray_packet::{LaneMask, PacketHits, RayPacket, for_lanes};
+use super::simd::RenderIsa;
 use glam::{Vec3, Vec3A};
 use obvhs::{BvhBuildParams, bvh2::Bvh2, cwbvh::CwBvh, ray::Ray, ray::RayHit};
 
@@ -28,6 +29,9 @@ enum Tree {
 pub struct Accel {
     pub shapes: Vec<Shape>,
     tree: Tree,
+    /// The instruction set of the packet traversal's kernel
+    /// (`RenderIsa::detect` at build time; every level gives the same bits).
+    isa: RenderIsa,
 }
 
 /// Closest hit: primitive index (into `shapes`) and the primitive hit.
@@ -43,6 +47,7 @@ impl Accel {
             return Accel {
                 shapes,
                 tree: Tree::Empty,
+                isa: RenderIsa::Sse,
             };
         }
         let mut t = std::time::Duration::ZERO;
@@ -60,7 +65,11 @@ impl Accel {
             BvhKind::Bvh2 => Tree::Two(obvhs::bvh2::builder::build_bvh2(&shapes, params, &mut t)),
             BvhKind::Cwbvh => Tree::Cw(obvhs::cwbvh::builder::build_cwbvh(&shapes, params, &mut t)),
         };
-        Accel { shapes, tree }
+        Accel {
+            shapes,
+            tree,
+            isa: RenderIsa::detect(),
+        }
     }
 
     /// Closest hit along `o + t·d`, t ∈ (0, tmax).
@@ -136,7 +145,7 @@ impl Accel {
     #[inline(always)]
     pub fn intersect_packet(&self, rays: &RayPacket, out: &mut PacketHits) {
         if let Tree::Four(b) = &self.tree {
-            return b.intersect_packet(&self.shapes, rays, out);
+            return b.intersect_packet_at(self.isa, &self.shapes, rays, out);
         }
         *out = PacketHits::default();
         for_lanes(rays.active, |l| {
@@ -153,7 +162,7 @@ impl Accel {
     #[inline(always)]
     pub fn unoccluded_packet(&self, rays: &RayPacket) -> LaneMask {
         if let Tree::Four(b) = &self.tree {
-            return b.unoccluded_packet(&self.shapes, rays);
+            return b.unoccluded_packet_at(self.isa, &self.shapes, rays);
         }
         let mut free = 0;
         for_lanes(rays.active, |l| {

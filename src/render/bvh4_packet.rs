@@ -30,6 +30,14 @@
 //!   written out (`unroll3`), and the rare f64 edge fallback kept scalar (as
 //!   a vector blend LLVM computed it on every triangle test).
 //!
+//! Kernels: `intersect_packet_at` / `unoccluded_packet_at` run this portable
+//! lane code at the SSE and AVX2 levels and, at `RenderIsa::Avx512`, the same
+//! traversal written with AVX-512 intrinsics (`bvh4_packet_avx512.rs`: masks
+//! in `__mmask16` registers, where the lane code round-trips every
+//! comparison through a vector of 0 / −1), lane for lane the same IEEE
+//! operations, so the same bits (`tests::check` compares every kernel the
+//! CPU has with this one).
+//!
 //! Results per lane equal the single-ray query's bit for bit (t,
 //! barycentrics, primitive; between primitives at exactly the same t either
 //! may be reported), with one exception inherent to the single-ray traversal
@@ -52,6 +60,7 @@ use super::bvh4::{Bvh4, EMPTY, LEAF, Node4, STACK};
 use super::geometry::{PrimHit, Shape, TriRay, gamma};
 use super::lanes::{M, V, max3_abs, unroll3};
 use super::ray_packet::{ALL_LANES, LANES, LaneMask, PacketHits, RayPacket};
+use super::simd::RenderIsa;
 use std::mem::MaybeUninit;
 
 /// The three components permuted per lane as the triangle test's axes
@@ -66,7 +75,7 @@ fn permute(v: [V; 3], kz0: M, kz1: M) -> [V; 3] {
 }
 
 /// Per-lane ray constants: what `RayPre::new` computes for each ray.
-struct PacketPre {
+pub(super) struct PacketPre {
     o: [V; 3],
     d: [V; 3],
     /// Inverse direction, clamped to ±1e30.
@@ -89,8 +98,32 @@ struct TriHits {
 }
 
 impl PacketPre {
+    /// Origin, clamped inverse direction, permuted origin, shear and the
+    /// two axis masks, lane by lane (for the AVX-512 kernel).
+    #[allow(clippy::type_complexity)]
     #[inline(always)]
-    fn new(r: &RayPacket) -> Self {
+    pub(super) fn parts(
+        &self,
+    ) -> (
+        [&[f32; LANES]; 3],
+        [&[f32; LANES]; 3],
+        [&[f32; LANES]; 3],
+        [&[f32; LANES]; 3],
+        &[i32; LANES],
+        &[i32; LANES],
+    ) {
+        (
+            [&self.o[0].0, &self.o[1].0, &self.o[2].0],
+            [&self.inv[0].0, &self.inv[1].0, &self.inv[2].0],
+            [&self.op[0].0, &self.op[1].0, &self.op[2].0],
+            [&self.s[0].0, &self.s[1].0, &self.s[2].0],
+            &self.kz0.0,
+            &self.kz1.0,
+        )
+    }
+
+    #[inline(always)]
+    pub(super) fn new(r: &RayPacket) -> Self {
         let o = [V(r.o[0]), V(r.o[1]), V(r.o[2])];
         let d = [V(r.d[0]), V(r.d[1]), V(r.d[2])];
         // As `TriRay::new`: the largest |d| component becomes z.
@@ -126,7 +159,7 @@ impl PacketPre {
 
     /// The lane's `TriRay` and direction (for the scalar sphere and disk tests).
     #[inline(always)]
-    fn tri_ray(&self, l: usize) -> (TriRay, glam::Vec3) {
+    pub(super) fn tri_ray(&self, l: usize) -> (TriRay, glam::Vec3) {
         let o = glam::Vec3::new(self.o[0].0[l], self.o[1].0[l], self.o[2].0[l]);
         let d = glam::Vec3::new(self.d[0].0[l], self.d[1].0[l], self.d[2].0[l]);
         let kz = if self.kz0.get(l) {
@@ -255,6 +288,42 @@ fn vertices(p: &super::bvh4::TriPacket, j: usize) -> [[f32; 3]; 3] {
 }
 
 impl Bvh4 {
+    /// `intersect_packet` with the kernel of `isa`: the AVX-512 intrinsics
+    /// of `bvh4_packet_avx512.rs` or the portable lane code (same bits).
+    #[inline(always)]
+    pub fn intersect_packet_at(
+        &self,
+        isa: RenderIsa,
+        shapes: &[Shape],
+        rays: &RayPacket,
+        out: &mut PacketHits,
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if isa == RenderIsa::Avx512 {
+            // SAFETY: `isa` is a level this CPU supports (`RenderIsa::detect`).
+            return unsafe { super::bvh4_packet_avx512::intersect_packet(self, shapes, rays, out) };
+        }
+        let _ = isa;
+        self.intersect_packet(shapes, rays, out)
+    }
+
+    /// `unoccluded_packet` with the kernel of `isa` (as `intersect_packet_at`).
+    #[inline(always)]
+    pub fn unoccluded_packet_at(
+        &self,
+        isa: RenderIsa,
+        shapes: &[Shape],
+        rays: &RayPacket,
+    ) -> LaneMask {
+        #[cfg(target_arch = "x86_64")]
+        if isa == RenderIsa::Avx512 {
+            // SAFETY: `isa` is a level this CPU supports (`RenderIsa::detect`).
+            return unsafe { super::bvh4_packet_avx512::unoccluded_packet(self, shapes, rays) };
+        }
+        let _ = isa;
+        self.unoccluded_packet(shapes, rays)
+    }
+
     /// Closest hits of the active lanes of `rays` (`PacketHits` per lane as
     /// `intersect` of the lane's ray; inactive lanes report no hit).
     #[inline(always)]
@@ -510,6 +579,20 @@ mod tests {
         bvh.intersect_packet(shapes, rays, &mut out);
         let free = bvh.unoccluded_packet(shapes, rays);
         assert_eq!(free & !rays.active, 0, "inactive lanes reported free");
+        // Every kernel this CPU has gives the portable kernel's bits.
+        for isa in RenderIsa::ALL.into_iter().filter(|l| l.supported()) {
+            let mut o2 = PacketHits {
+                prim: [9; LANES],
+                ..Default::default()
+            };
+            bvh.intersect_packet_at(isa, shapes, rays, &mut o2);
+            assert_eq!(o2.prim, out.prim, "{isa:?}");
+            for l in 0..LANES {
+                let bits = |h: &PrimHit| [h.t, h.b[0], h.b[1], h.b[2]].map(f32::to_bits);
+                assert_eq!(bits(&o2.h[l]), bits(&out.h[l]), "{isa:?} lane {l}");
+            }
+            assert_eq!(bvh.unoccluded_packet_at(isa, shapes, rays), free, "{isa:?}");
+        }
         let mut n = [0; 3];
         for l in 0..LANES {
             if rays.active & (1 << l) == 0 {
@@ -678,9 +761,9 @@ mod tests {
     /// Seconds for: single-ray closest hits, packet closest hits, single-ray
     /// occlusion, packet occlusion; and a checksum.
     #[inline(always)]
-    fn timing(bvh: &Bvh4, shapes: &[Shape], sec: &[RayPacket], shadow: &[RayPacket]) -> [f64; 5] {
+    fn timing(bvh: &Bvh4, shapes: &[Shape], sec: &[RayPacket], shadow: &[RayPacket]) -> [f64; 7] {
         let mut sum = 0.0f64;
-        let mut t = [0.0f64; 5];
+        let mut t = [0.0f64; 7];
         let now = std::time::Instant::now();
         for p in sec {
             for l in 0..LANES {
@@ -712,19 +795,35 @@ mod tests {
             n += bvh.unoccluded_packet(shapes, p).count_ones();
         }
         t[3] = now.elapsed().as_secs_f64();
+        // The AVX-512 intrinsics kernel where the CPU has it.
+        if RenderIsa::Avx512.supported() {
+            let now = std::time::Instant::now();
+            for p in sec {
+                bvh.intersect_packet_at(RenderIsa::Avx512, shapes, p, &mut out);
+                sum += out.h[0].t as f64;
+            }
+            t[5] = now.elapsed().as_secs_f64();
+            let now = std::time::Instant::now();
+            for p in shadow {
+                n += bvh
+                    .unoccluded_packet_at(RenderIsa::Avx512, shapes, p)
+                    .count_ones();
+            }
+            t[6] = now.elapsed().as_secs_f64();
+        }
         t[4] = sum + n as f64;
         t
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
-    fn timing_avx2(b: &Bvh4, s: &[Shape], sec: &[RayPacket], sh: &[RayPacket]) -> [f64; 5] {
+    fn timing_avx2(b: &Bvh4, s: &[Shape], sec: &[RayPacket], sh: &[RayPacket]) -> [f64; 7] {
         timing(b, s, sec, sh)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512dq,avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
-    fn timing_avx512(b: &Bvh4, s: &[Shape], sec: &[RayPacket], sh: &[RayPacket]) -> [f64; 5] {
+    fn timing_avx512(b: &Bvh4, s: &[Shape], sec: &[RayPacket], sh: &[RayPacket]) -> [f64; 7] {
         timing(b, s, sec, sh)
     }
 
@@ -744,7 +843,7 @@ mod tests {
             if !isa.supported() {
                 continue;
             }
-            let mut best = [f64::INFINITY; 4];
+            let mut best = [f64::INFINITY; 7];
             for _ in 0..5 {
                 let t = match isa {
                     RenderIsa::Sse => timing(&bvh, shapes, &sec, &shadow),
@@ -753,7 +852,7 @@ mod tests {
                     // SAFETY: as above.
                     RenderIsa::Avx512 => unsafe { timing_avx512(&bvh, shapes, &sec, &shadow) },
                 };
-                for k in 0..4 {
+                for k in 0..7 {
                     best[k] = best[k].min(t[k]);
                 }
             }
@@ -768,6 +867,15 @@ mod tests {
                 ns[3],
                 ns[2] / ns[3]
             );
+            if isa == RenderIsa::Avx512 {
+                println!(
+                    "  avx512 intrinsics kernel: closest packet {:.1} ns/ray ({:.2}x single), occlusion packet {:.1} ns/ray ({:.2}x)",
+                    ns[5],
+                    ns[0] / ns[5],
+                    ns[6],
+                    ns[2] / ns[6]
+                );
+            }
         }
     }
 }

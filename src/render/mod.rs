@@ -43,7 +43,8 @@
 //!   is traced alone (`integrator::trace`); `CAMSIM_RENDER_PACKETS=1` traces
 //!   a pixel's samples 16 at a time (`integrator::trace_packet`): each bounce
 //!   casts the live paths' rays as one `RayPacket` through the packet
-//!   traversal (`bvh4_packet.rs`, SIMD across rays), shades each path, then
+//!   traversal (`bvh4_packet.rs`, SIMD across rays; AVX-512 intrinsics in
+//!   `bvh4_packet_avx512.rs` at that level), shades each path, then
 //!   casts their shadow rays as one packet. Both render the same bits; one
 //!   bounce is one function (`integrator::scatter`) for both. On the bench's
 //!   36-triangle box the packets are not yet faster (README, *Performance by
@@ -72,6 +73,8 @@ pub mod bench;
 pub mod bsdf;
 pub mod bvh4;
 pub mod bvh4_packet;
+#[cfg(target_arch = "x86_64")]
+mod bvh4_packet_avx512;
 pub mod film;
 pub mod geometry;
 pub mod integrator;
