@@ -132,7 +132,7 @@ def mitsuba_reference(mi, dr, scene, spp, batches, pass_spp, cache):
 CAMSIM_CPU = []
 # The render kernel level camsim ran (`render_isa=` of its bench line; CAMSIM_RENDER_ISA lowers it).
 CAMSIM_ISA = []
-# Whether camsim traced 16 paths at a time (`packets=` of its bench line; CAMSIM_RENDER_PACKETS=1).
+# Whether camsim traced 16 paths at a time (`packets=` of its bench line; default at avx2 and avx512, CAMSIM_RENDER_PACKETS=0|1 forces it).
 CAMSIM_PACKETS = []
 
 

@@ -27,8 +27,9 @@
 #   renderer's default for experiments, which estimate their error from the
 #   batch spread at the cost of stratifying only spp/8 points per batch),
 #   SAMPLER (camsim's sampler: sobol, the default, or independent);
-#   CAMSIM_RENDER_ISA=sse|avx2 (lower camsim's kernel) and CAMSIM_RENDER_PACKETS=1
-#   (trace 16 paths at a time) pass through to camsim; the RATIO line names both.
+#   CAMSIM_RENDER_ISA=sse|avx2 (lower camsim's kernel) and CAMSIM_RENDER_PACKETS=0|1
+#   (one path / 16 paths at a time; default 16 at avx2 and avx512) pass through to
+#   camsim; the RATIO line names both.
 set -euo pipefail
 SPP="${1:-32}"
 HERE="$(cd "$(dirname "$0")/.." && pwd)"

@@ -142,6 +142,11 @@ pub struct Manifest {
     /// lowers it); empty in manifests written before it was recorded.
     #[serde(default)]
     pub render_isa: String,
+    /// True when the path tracer traced 16 paths at a time (`render::film::
+    /// packets_enabled`; the same image bits as one at a time); false in
+    /// manifests written before it was recorded.
+    #[serde(default)]
+    pub render_packets: bool,
     /// `[i, n]` for a shard run.
     pub shard: Option<[usize; 2]>,
     pub axes: Vec<String>,
@@ -172,6 +177,7 @@ impl Manifest {
             threads,
             cpu: crate::machine::cpu().to_string(),
             render_isa: crate::render::simd::RenderIsa::detect().name().to_string(),
+            render_packets: crate::render::film::Kernel::detect().packets,
             shard: shard.map(|(i, n)| [i, n]),
             axes: plan.axes.clone(),
             quality: plan.quality.clone(),

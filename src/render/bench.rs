@@ -537,9 +537,9 @@ pub fn run(o: &BenchOptions) -> Result<String> {
     let isa = kernel.isa.name();
     out += &format!("render kernel: {isa}\n");
     out += if kernel.packets {
-        "render paths: 16 at a time (CAMSIM_RENDER_PACKETS=1)\n"
+        "render paths: 16 at a time (CAMSIM_RENDER_PACKETS=0 for one at a time)\n"
     } else {
-        "render paths: one at a time\n"
+        "render paths: one at a time (CAMSIM_RENDER_PACKETS=1 for 16 at a time)\n"
     };
     let mut kv = format!(
         "camsim-bench spp={} wall_s={:.4} cpu_s={:.4} paths_per_s={:.1} mean_y={:.6} render_isa={isa} packets={} batches={} sampler={}",

@@ -1,8 +1,8 @@
 //! The film: pixel sampling, camera weights, batch statistics, labels and
 //! depth, parallel over image rows with per-pixel seeding.
 
-use super::integrator::{PacketScratch, PathState, Scratch, first_hit, trace, trace_packet};
-use super::ray_packet::{LANES, LaneMask};
+use super::integrator::{PacketScratch, PathState, Scratch, first_hit, step_packet, trace};
+use super::ray_packet::{ALL_LANES, LANES, LaneMask};
 use super::sampler::{BatchScramble, Sampler, SamplerKind};
 use super::sampling::Rng;
 use super::settings::RenderSettings;
@@ -75,11 +75,12 @@ pub struct Kernel {
 
 impl Kernel {
     /// The widest instruction set of this machine (`RenderIsa::detect`) and
-    /// `CAMSIM_RENDER_PACKETS` (`packets_enabled`).
+    /// its default path mode, or `CAMSIM_RENDER_PACKETS` (`packets_enabled`).
     pub fn detect() -> Self {
+        let isa = RenderIsa::detect();
         Kernel {
-            isa: RenderIsa::detect(),
-            packets: packets_enabled(),
+            isa,
+            packets: packets_enabled(isa),
         }
     }
 }
@@ -211,13 +212,26 @@ fn accumulate(acc: &mut [f64], l: &[f32], weight: f64) -> u64 {
     0
 }
 
-/// Trace a pixel's samples 16 paths at a time (`integrator::trace_packet`,
-/// packet traversal) instead of one by one: `CAMSIM_RENDER_PACKETS=1`. Same
-/// image bits either way. Off by default: on the bench's Cornell box it
-/// measured ≈ 5 % slower (README, *Performance by machine*).
-pub fn packets_enabled() -> bool {
-    static P: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    *P.get_or_init(|| std::env::var("CAMSIM_RENDER_PACKETS").is_ok_and(|v| v == "1"))
+/// Whether a pixel's samples are traced 16 paths at a time
+/// (`integrator::step_packet`, packet traversal, lanes refilled as paths end)
+/// at instruction set `isa`, or one by one. Same image bits either way.
+/// `CAMSIM_RENDER_PACKETS=1` / `=0` forces the choice (anything else is
+/// ignored with a warning); by default packets at AVX2 and AVX-512, where
+/// they measured faster on the bench's Cornell box (AVX-512 ≈ 7 %, AVX2
+/// ≈ 3 % wall), one by one at SSE, where the packet traversal is slower
+/// (README, *Performance by machine*).
+pub fn packets_enabled(isa: RenderIsa) -> bool {
+    static P: std::sync::OnceLock<Option<bool>> = std::sync::OnceLock::new();
+    let forced = *P.get_or_init(|| match std::env::var("CAMSIM_RENDER_PACKETS") {
+        Err(_) => None,
+        Ok(v) if v == "1" => Some(true),
+        Ok(v) if v == "0" => Some(false),
+        Ok(v) => {
+            eprintln!("warning: CAMSIM_RENDER_PACKETS=\"{v}\" ignored (expected 0 or 1)");
+            None
+        }
+    });
+    forced.unwrap_or(isa >= RenderIsa::Avx2)
 }
 
 /// What every row of one render shares.
@@ -232,7 +246,7 @@ struct RowJob<'a> {
     dispersive_cam: bool,
     mid_nm: f64,
     wsets: &'a [&'a [f32]],
-    /// Trace a pixel's paths 16 at a time (`trace_packet`).
+    /// Trace a pixel's paths 16 at a time (`step_packet`).
     packets: bool,
 }
 
@@ -373,7 +387,11 @@ impl RowJob<'_> {
             .map(|_| Sampler::independent(Rng::for_sample(0, 0, 0)))
             .collect();
         let mut paths = [PathState::camera(Vec3::ZERO, Vec3::Z, None); LANES];
-        let mut weights = [0.0f64; LANES];
+        // Packets: each sample's camera weight (`None`: vignetted), the
+        // sample each lane traces, and each sample's radiance.
+        let mut weights: Vec<Option<f64>> = vec![None; if packets { order.len() } else { 0 }];
+        let mut lane_sample = [0usize; LANES];
+        let mut radiance = vec![0.0f32; if packets { order.len() * nb } else { 0 }];
         let mut acc = vec![0.0f64; nb * batches];
         let mut counts = vec![0u32; batches];
         let mut mean_px = vec![0.0f64; nb];
@@ -403,12 +421,20 @@ impl RowJob<'_> {
                 );
             }
             if packets {
-                // The pixel's samples in batch order, LANES paths traced together.
-                for chunk in order.chunks(LANES) {
-                    let mut alive: LaneMask = 0;
-                    for (lane, &(bi, j)) in chunk.iter().enumerate() {
+                // The pixel's samples in batch order, LANES paths traced
+                // together; a lane whose path ends takes the next sample at
+                // once. Each sample's radiance waits in `radiance` until all
+                // are traced, then the samples are accumulated in order: the
+                // pixel is bit for bit what tracing them one by one gives.
+                let mut next = 0usize;
+                let mut alive: LaneMask = 0;
+                weights.iter_mut().for_each(|w| *w = None);
+                loop {
+                    let mut idle = !alive & ALL_LANES;
+                    while idle != 0 && next < order.len() {
+                        let lane = idle.trailing_zeros() as usize;
+                        let (bi, j) = order[next];
                         counts[bi as usize] += 1;
-                        let beta = &mut psc.beta[lane * nbp..(lane + 1) * nbp];
                         if let Some((st, w)) = self.start_sample(
                             px,
                             py,
@@ -416,21 +442,35 @@ impl RowJob<'_> {
                             &scrambles,
                             (bi, j),
                             &mut smps[lane],
-                            beta,
+                            psc.beta_mut(lane),
                         ) {
                             paths[lane] = st;
-                            weights[lane] = w;
+                            weights[next] = Some(w);
+                            lane_sample[lane] = next;
+                            psc.clear_radiance(lane);
                             alive |= 1 << lane;
+                            idle &= idle - 1;
                         }
+                        next += 1;
                     }
-                    trace_packet(world, &mut paths, alive, s.max_bounces, &mut smps, &mut psc);
-                    // Accumulate in sample order.
-                    for (lane, &(bi, _)) in chunk.iter().enumerate() {
-                        if alive & (1 << lane) != 0 {
-                            let l = &psc.l[lane * nbp..lane * nbp + nb];
-                            let a = &mut acc[bi as usize * nb..(bi as usize + 1) * nb];
-                            nan += accumulate(a, l, weights[lane]);
-                        }
+                    if alive == 0 {
+                        break;
+                    }
+                    let ended =
+                        step_packet(world, &mut paths, alive, s.max_bounces, &mut smps, &mut psc);
+                    let mut m = ended;
+                    while m != 0 {
+                        let lane = m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        let k = lane_sample[lane];
+                        radiance[k * nb..(k + 1) * nb].copy_from_slice(&psc.radiance(lane)[..nb]);
+                    }
+                    alive &= !ended;
+                }
+                for (k, &(bi, _)) in order.iter().enumerate() {
+                    if let Some(w) = weights[k] {
+                        let a = &mut acc[bi as usize * nb..(bi as usize + 1) * nb];
+                        nan += accumulate(a, &radiance[k * nb..(k + 1) * nb], w);
                     }
                 }
             } else {
@@ -500,19 +540,20 @@ mod tests {
     /// one or 16 at a time, renders the same image bit for bit (irradiance,
     /// standard errors, labels, depth): the levels do the same IEEE
     /// operations in the same order (`simd.rs`), and a path in a packet the
-    /// same operations as alone (`integrator::trace_packet`). The Cornell box
-    /// exercises diffuse and area-light paths, roulette and MIS; 8 spp in 3
-    /// batches leaves packets partly empty.
+    /// same operations as alone (`integrator::step_packet`). The Cornell box
+    /// exercises diffuse and area-light paths, roulette and MIS; 40 spp in 3
+    /// batches (14, 13, 13 samples) fill the 16 lanes, refill each lane as its
+    /// path ends, and leave lanes empty at the pixel's end.
     #[test]
     fn every_isa_level_renders_the_same_bits() {
         let (scene, film) = mitsuba_cornell_box();
         let cam = Pinhole::new(39.3077, 1.0, &film).unwrap();
         let to_world = scene.camera.as_ref().map(|c| c.to_world).unwrap();
         let s = RenderSettings {
-            spp: 8,
+            spp: 40,
             batches: 3,
             threads: 2,
-            roi: Some(Rect::new(96, 16, 48, 48)),
+            roi: Some(Rect::new(96, 16, 32, 32)),
             ..Default::default()
         };
         let world = World::build(&scene, &s.grid, BvhKind::Bvh4).unwrap();
@@ -536,5 +577,66 @@ mod tests {
             assert_eq!(img.labels, imgs[0].labels, "{l:?}");
             assert!(bits(&img.depth_m) == bits(&imgs[0].depth_m), "{l:?} depth");
         }
+    }
+
+    /// Packets refill a lane with the pixel's next sample as a path ends,
+    /// skipping samples the camera vignettes: through the Pixel 4a RTF on a
+    /// film wider than its field, some pixels lose part of their samples,
+    /// and both path modes must still give the same bits.
+    #[test]
+    fn packets_refill_around_vignetted_samples() {
+        let (scene, _) = mitsuba_cornell_box();
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let lens = crate::optics::analysis::load_lens(
+            &dir.join("lenses/rtf/pixel4a-rearcamera-ellipse-raytransfer.json"),
+        )
+        .unwrap();
+        let cam = match crate::optics::analysis::lens_camera(lens, Some(0.465136), None, 550.0)
+            .unwrap()
+        {
+            crate::optics::analysis::LensCamera::Rtf(c) => c,
+            _ => unreachable!("an RTF file"),
+        };
+        let film = FilmSpec {
+            width_px: 24,
+            height_px: 24,
+            pixel_pitch_m: 300e-6,
+            crop_window: None,
+        };
+        let to_world = scene.camera.as_ref().map(|c| c.to_world).unwrap();
+        let s = RenderSettings {
+            spp: 40,
+            batches: 2,
+            threads: 2,
+            ..Default::default()
+        };
+        let world = World::build(&scene, &s.grid, BvhKind::Bvh4).unwrap();
+        let isa = RenderIsa::detect();
+        let render = |packets| {
+            render_world_at(
+                Kernel { isa, packets },
+                &world,
+                &cam,
+                &to_world,
+                &film,
+                &s,
+                vec![],
+            )
+            .unwrap()
+        };
+        let (one, packed) = (render(false), render(true));
+        let nb = world.bands;
+        let lit = |img: &OpticalImage| {
+            img.irradiance
+                .chunks(nb)
+                .filter(|p| p.iter().any(|&x| x > 0.0))
+                .count()
+        };
+        // Some pixels see the box, some lie outside the lens's field.
+        let n = lit(&one);
+        assert!(n > 0 && n < 24 * 24, "{n} lit pixels");
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert!(bits(&one.irradiance) == bits(&packed.irradiance));
+        assert!(bits(&one.stderr) == bits(&packed.stderr));
     }
 }

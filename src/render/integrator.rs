@@ -12,7 +12,7 @@
 
 use super::accel::Hit;
 use super::geometry::offset_ray_origin;
-use super::ray_packet::{LANES, LaneMask, PacketHits, RayPacket, for_lanes};
+use super::ray_packet::{LANES, LaneMask, PacketHits, RayPacket};
 use super::sampler::Sampler;
 use super::sampling::{Frame, power_heuristic};
 use super::world::{LightKind, World};
@@ -397,6 +397,9 @@ pub struct PacketScratch {
     pub l: Vec<f32>,
     pend: Vec<f32>,
     f: Vec<f32>,
+    rays: RayPacket,
+    hits: PacketHits,
+    shadows: RayPacket,
 }
 
 impl PacketScratch {
@@ -407,71 +410,104 @@ impl PacketScratch {
             l: vec![0.0; nb * LANES],
             pend: vec![0.0; nb * LANES],
             f: vec![0.0; nb],
+            rays: RayPacket::default(),
+            hits: PacketHits::default(),
+            shadows: RayPacket::default(),
         }
+    }
+
+    /// Lane `lane`'s radiance, all `stride` bands.
+    #[inline(always)]
+    pub fn radiance(&self, lane: usize) -> &[f32] {
+        &self.l[lane * self.stride..(lane + 1) * self.stride]
+    }
+
+    /// Lane `lane`'s throughput, for a new path to set.
+    #[inline(always)]
+    pub fn beta_mut(&mut self, lane: usize) -> &mut [f32] {
+        &mut self.beta[lane * self.stride..(lane + 1) * self.stride]
+    }
+
+    /// Clear lane `lane`'s radiance for a new path.
+    #[inline(always)]
+    pub fn clear_radiance(&mut self, lane: usize) {
+        self.l[lane * self.stride..(lane + 1) * self.stride].fill(0.0);
     }
 }
 
-/// Trace the paths of the lanes in `alive` together (issue 17 item 1): each
-/// bounce casts their rays as one packet, shades each lane, then casts their
-/// shadow rays as one packet. Lane `l` starts from `st[l]` with its
-/// throughput in `sc.beta` and ends with its radiance in `sc.l`, bit for bit
-/// what `trace` gives for that path: each lane takes the same draws and does
-/// the same operations in the same order.
+/// One bounce of the paths in the lanes of `alive` (issue 17 item 1): their
+/// rays are cast as one packet, each lane is shaded (`scatter`), then their
+/// shadow rays are cast as one packet. Lane `l` continues from `st[l]` with
+/// its throughput and radiance in `sc`; returns the lanes whose paths ended
+/// at this bounce (their radiance in `sc.l` is final). Each lane takes the
+/// same draws and does the same operations in the same order as `trace`
+/// does for that path, so a path traced bounce by bounce here, in any lane
+/// and beside any other paths, gives `trace`'s bits.
 #[inline(always)]
-pub fn trace_packet(
+pub fn step_packet(
     world: &World,
     st: &mut [PathState; LANES],
-    mut alive: LaneMask,
+    alive: LaneMask,
     max_bounces: u32,
     smp: &mut [Sampler],
     sc: &mut PacketScratch,
-) {
+) -> LaneMask {
     let n = sc.stride;
-    sc.l.iter_mut().for_each(|x| *x = 0.0);
-    let mut rays = RayPacket::default();
-    let mut hits = PacketHits::default();
-    let mut shadows = RayPacket::default();
-    while alive != 0 {
-        rays.active = 0;
-        for_lanes(alive, |i| rays.set(i, st[i].o, st[i].d, f32::INFINITY));
-        world.accel.intersect_packet(&rays, &mut hits);
-        shadows.active = 0;
-        for_lanes(alive, |i| {
-            let span = i * n..(i + 1) * n;
-            if hits.prim[i] == u32::MAX {
-                escape(world, &st[i], &sc.beta[span.clone()], &mut sc.l[span]);
-                alive &= !(1 << i);
-                return;
-            }
-            let hit = Hit {
-                prim: hits.prim[i],
-                h: hits.h[i],
-            };
-            let (shadow, go_on) = scatter(
-                world,
-                &mut st[i],
-                &hit,
-                max_bounces,
-                &mut smp[i],
-                &mut sc.beta[span.clone()],
-                &mut sc.l[span.clone()],
-                &mut sc.f,
-                Some(&mut sc.pend[span]),
-            );
-            if let Some(r) = shadow {
-                shadows.set(i, r.o, r.d, r.tmax);
-            }
-            if !go_on {
-                alive &= !(1 << i);
-            }
-        });
-        if shadows.active != 0 {
-            let free = world.accel.unoccluded_packet(&shadows);
-            for_lanes(free, |i| {
-                add_pending(&mut sc.l[i * n..(i + 1) * n], &sc.pend[i * n..(i + 1) * n])
-            });
+    let mut ended: LaneMask = 0;
+    // Plain bit loops, no closures: a closure is compiled for the baseline
+    // instruction set, not for the render kernel's (`simd.rs`), so the
+    // shading in it would run 4 bands wide (measured: all of `scatter` in
+    // SSE code inside the AVX-512 kernel).
+    sc.rays.active = 0;
+    let mut m = alive;
+    while m != 0 {
+        let i = m.trailing_zeros() as usize;
+        m &= m - 1;
+        sc.rays.set(i, st[i].o, st[i].d, f32::INFINITY);
+    }
+    world.accel.intersect_packet(&sc.rays, &mut sc.hits);
+    sc.shadows.active = 0;
+    let mut m = alive;
+    while m != 0 {
+        let i = m.trailing_zeros() as usize;
+        m &= m - 1;
+        let span = i * n..(i + 1) * n;
+        if sc.hits.prim[i] == u32::MAX {
+            escape(world, &st[i], &sc.beta[span.clone()], &mut sc.l[span]);
+            ended |= 1 << i;
+            continue;
+        }
+        let hit = Hit {
+            prim: sc.hits.prim[i],
+            h: sc.hits.h[i],
+        };
+        let (shadow, go_on) = scatter(
+            world,
+            &mut st[i],
+            &hit,
+            max_bounces,
+            &mut smp[i],
+            &mut sc.beta[span.clone()],
+            &mut sc.l[span.clone()],
+            &mut sc.f,
+            Some(&mut sc.pend[span]),
+        );
+        if let Some(r) = shadow {
+            sc.shadows.set(i, r.o, r.d, r.tmax);
+        }
+        if !go_on {
+            ended |= 1 << i;
         }
     }
+    if sc.shadows.active != 0 {
+        let mut free = world.accel.unoccluded_packet(&sc.shadows);
+        while free != 0 {
+            let i = free.trailing_zeros() as usize;
+            free &= free - 1;
+            add_pending(&mut sc.l[i * n..(i + 1) * n], &sc.pend[i * n..(i + 1) * n]);
+        }
+    }
+    ended
 }
 
 #[cfg(test)]
