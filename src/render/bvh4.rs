@@ -74,6 +74,9 @@ pub(super) struct TriPacket {
     pub(super) prim: [u32; 4],
     /// Lanes `0..n` hold triangles.
     pub(super) n: u32,
+    /// The same vertices one triangle at a time, `xyz[lane][vertex]` =
+    /// (x, y, z, 0): what the AVX-512 packet kernel loads and permutes per ray.
+    pub(super) xyz: [[[f32; 4]; 3]; 4],
 }
 
 pub struct Bvh4 {
@@ -264,6 +267,7 @@ impl Bvh4 {
             v: [[f32x4::ZERO; 3]; 3],
             prim: [EMPTY; 4],
             n: 0,
+            xyz: [[[0.0; 4]; 3]; 4],
         };
         let mut v = [[[0.0f32; 4]; 3]; 3];
         let others = self.others.len() as u32;
@@ -275,6 +279,7 @@ impl Bvh4 {
                         for a in 0..3 {
                             v[vi][a][l] = pv[a];
                         }
+                        packet.xyz[l][vi] = [pv.x, pv.y, pv.z, 0.0];
                     }
                     packet.prim[l] = prim;
                     packet.n += 1;

@@ -39,8 +39,9 @@ struct Pre {
     inv: [__m512; 3],
     op: [__m512; 3],
     s: [__m512; 3],
-    kz0: __mmask16,
-    kz1: __mmask16,
+    /// Per lane, the index (0 = x, 1 = y, 2 = z) of the triangle test's
+    /// axes kx, ky, kz, for `_mm512_permutexvar_ps`.
+    k: [__m512i; 3],
 }
 
 /// Triangle hits of a set of lanes: t, edge functions and 1/det per lane.
@@ -103,15 +104,20 @@ unsafe fn max3_abs(v: &[__m512; 3]) -> __m512 {
     }
 }
 
-/// `bvh4_packet::permute`: (x, y, z) as (kx, ky, kz) per lane.
+/// The axes (kx, ky, kz) of `bvh4_packet::permute` as component indices per
+/// lane: kz = x gives (y, z, x), kz = y (z, x, y), otherwise (x, y, z).
 #[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512dq")]
 #[inline]
-unsafe fn permute(v: [__m512; 3], kz0: __mmask16, kz1: __mmask16) -> [__m512; 3] {
-    [
-        _mm512_mask_mov_ps(_mm512_mask_mov_ps(v[0], kz1, v[2]), kz0, v[1]),
-        _mm512_mask_mov_ps(_mm512_mask_mov_ps(v[1], kz1, v[0]), kz0, v[2]),
-        _mm512_mask_mov_ps(_mm512_mask_mov_ps(v[2], kz1, v[1]), kz0, v[0]),
-    ]
+unsafe fn axes(kz0: __mmask16, kz1: __mmask16) -> [__m512i; 3] {
+    let pick = |x: i32, y: i32, z: i32| {
+        _mm512_mask_mov_epi32(
+            _mm512_mask_mov_epi32(_mm512_set1_epi32(x), kz1, _mm512_set1_epi32(z)),
+            kz0,
+            _mm512_set1_epi32(y),
+        )
+    };
+    // kx: x, or y (kz = x), or z (kz = y); likewise ky and kz.
+    [pick(0, 1, 2), pick(1, 2, 0), pick(2, 0, 1)]
 }
 
 impl Pre {
@@ -126,8 +132,10 @@ impl Pre {
                 inv: [ld(inv[0]), ld(inv[1]), ld(inv[2])],
                 op: [ld(op[0]), ld(op[1]), ld(op[2])],
                 s: [ld(s[0]), ld(s[1]), ld(s[2])],
-                kz0: _mm512_movepi32_mask(_mm512_loadu_si512(kz0.as_ptr().cast())),
-                kz1: _mm512_movepi32_mask(_mm512_loadu_si512(kz1.as_ptr().cast())),
+                k: axes(
+                    _mm512_movepi32_mask(_mm512_loadu_si512(kz0.as_ptr().cast())),
+                    _mm512_movepi32_mask(_mm512_loadu_si512(kz1.as_ptr().cast())),
+                ),
             }
         }
     }
@@ -169,12 +177,12 @@ impl Pre {
             let mut py = [zero; 3];
             let mut pz = [zero; 3];
             for i in 0..3 {
-                let v = [
-                    splat(p.v[i][0].as_array()[j]),
-                    splat(p.v[i][1].as_array()[j]),
-                    splat(p.v[i][2].as_array()[j]),
-                ];
-                let [vx, vy, vz] = permute(v, self.kz0, self.kz1);
+                // The vertex as (x, y, z, ·) in every 128-bit block; each
+                // lane picks its permuted components from the first one.
+                let v = _mm512_broadcast_f32x4(_mm_loadu_ps(p.xyz[j][i].as_ptr()));
+                let vx = _mm512_permutexvar_ps(self.k[0], v);
+                let vy = _mm512_permutexvar_ps(self.k[1], v);
+                let vz = _mm512_permutexvar_ps(self.k[2], v);
                 pz[i] = _mm512_sub_ps(vz, self.op[2]);
                 px[i] = _mm512_add_ps(
                     _mm512_sub_ps(vx, self.op[0]),
