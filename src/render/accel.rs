@@ -145,7 +145,7 @@ impl Accel {
     #[inline(always)]
     pub fn intersect_packet(&self, rays: &RayPacket, out: &mut PacketHits) {
         if let Tree::Four(b) = &self.tree {
-            return b.intersect_packet_at(self.isa, &self.shapes, rays, out);
+            return intersect_packet_at(b, self.isa, &self.shapes, rays, out);
         }
         *out = PacketHits::default();
         for_lanes(rays.active, |l| {
@@ -162,7 +162,7 @@ impl Accel {
     #[inline(always)]
     pub fn unoccluded_packet(&self, rays: &RayPacket) -> LaneMask {
         if let Tree::Four(b) = &self.tree {
-            return b.unoccluded_packet_at(self.isa, &self.shapes, rays);
+            return unoccluded_packet_at(b, self.isa, &self.shapes, rays);
         }
         let mut free = 0;
         for_lanes(rays.active, |l| {
@@ -173,4 +173,41 @@ impl Accel {
         });
         free
     }
+}
+
+/// `Bvh4::intersect_packet` with the kernel of `isa`: the AVX-512 intrinsics
+/// of `bvh4_packet_avx512.rs` at that level, else the portable lane code of
+/// `bvh4_packet.rs` (the same bits).
+#[inline(always)]
+pub(super) fn intersect_packet_at(
+    bvh: &super::bvh4::Bvh4,
+    isa: RenderIsa,
+    shapes: &[Shape],
+    rays: &RayPacket,
+    out: &mut PacketHits,
+) {
+    #[cfg(target_arch = "x86_64")]
+    if isa == RenderIsa::Avx512 {
+        // SAFETY: `isa` is a level this CPU supports (`RenderIsa::detect`).
+        return unsafe { super::bvh4_packet_avx512::intersect_packet(bvh, shapes, rays, out) };
+    }
+    let _ = isa;
+    bvh.intersect_packet(shapes, rays, out)
+}
+
+/// `Bvh4::unoccluded_packet` with the kernel of `isa` (as `intersect_packet_at`).
+#[inline(always)]
+pub(super) fn unoccluded_packet_at(
+    bvh: &super::bvh4::Bvh4,
+    isa: RenderIsa,
+    shapes: &[Shape],
+    rays: &RayPacket,
+) -> LaneMask {
+    #[cfg(target_arch = "x86_64")]
+    if isa == RenderIsa::Avx512 {
+        // SAFETY: `isa` is a level this CPU supports (`RenderIsa::detect`).
+        return unsafe { super::bvh4_packet_avx512::unoccluded_packet(bvh, shapes, rays) };
+    }
+    let _ = isa;
+    bvh.unoccluded_packet(shapes, rays)
 }

@@ -30,9 +30,9 @@
 //!   written out (`unroll3`), and the rare f64 edge fallback kept scalar (as
 //!   a vector blend LLVM computed it on every triangle test).
 //!
-//! Kernels: `intersect_packet_at` / `unoccluded_packet_at` run this portable
-//! lane code at the SSE and AVX2 levels and, at `RenderIsa::Avx512`, the same
-//! traversal written with AVX-512 intrinsics (`bvh4_packet_avx512.rs`: masks
+//! Kernels: `Accel::intersect_packet` / `unoccluded_packet` run this
+//! portable lane code at the SSE and AVX2 levels and, at `RenderIsa::Avx512`,
+//! the same traversal written with AVX-512 intrinsics (`bvh4_packet_avx512.rs`: masks
 //! in `__mmask16` registers, where the lane code round-trips every
 //! comparison through a vector of 0 / −1), lane for lane the same IEEE
 //! operations, so the same bits (`tests::check` compares every kernel the
@@ -60,7 +60,6 @@ use super::bvh4::{Bvh4, EMPTY, LEAF, Node4, STACK};
 use super::geometry::{PrimHit, Shape, TriRay, gamma};
 use super::lanes::{M, V, max3_abs, unroll3};
 use super::ray_packet::{ALL_LANES, LANES, LaneMask, PacketHits, RayPacket};
-use super::simd::RenderIsa;
 use std::mem::MaybeUninit;
 
 /// The three components permuted per lane as the triangle test's axes
@@ -288,42 +287,6 @@ fn vertices(p: &super::bvh4::TriPacket, j: usize) -> [[f32; 3]; 3] {
 }
 
 impl Bvh4 {
-    /// `intersect_packet` with the kernel of `isa`: the AVX-512 intrinsics
-    /// of `bvh4_packet_avx512.rs` or the portable lane code (same bits).
-    #[inline(always)]
-    pub fn intersect_packet_at(
-        &self,
-        isa: RenderIsa,
-        shapes: &[Shape],
-        rays: &RayPacket,
-        out: &mut PacketHits,
-    ) {
-        #[cfg(target_arch = "x86_64")]
-        if isa == RenderIsa::Avx512 {
-            // SAFETY: `isa` is a level this CPU supports (`RenderIsa::detect`).
-            return unsafe { super::bvh4_packet_avx512::intersect_packet(self, shapes, rays, out) };
-        }
-        let _ = isa;
-        self.intersect_packet(shapes, rays, out)
-    }
-
-    /// `unoccluded_packet` with the kernel of `isa` (as `intersect_packet_at`).
-    #[inline(always)]
-    pub fn unoccluded_packet_at(
-        &self,
-        isa: RenderIsa,
-        shapes: &[Shape],
-        rays: &RayPacket,
-    ) -> LaneMask {
-        #[cfg(target_arch = "x86_64")]
-        if isa == RenderIsa::Avx512 {
-            // SAFETY: `isa` is a level this CPU supports (`RenderIsa::detect`).
-            return unsafe { super::bvh4_packet_avx512::unoccluded_packet(self, shapes, rays) };
-        }
-        let _ = isa;
-        self.unoccluded_packet(shapes, rays)
-    }
-
     /// Closest hits of the active lanes of `rays` (`PacketHits` per lane as
     /// `intersect` of the lane's ray; inactive lanes report no hit).
     #[inline(always)]
@@ -556,6 +519,9 @@ mod tests {
     use crate::spectrum::WavelengthGrid;
     use glam::Vec3;
 
+    use crate::render::accel::{intersect_packet_at, unoccluded_packet_at};
+    use crate::render::simd::RenderIsa;
+
     fn cornell() -> World {
         let (scene, _) = crate::render::bench::mitsuba_cornell_box();
         let grid = WavelengthGrid::new(500.0, 600.0, 50.0).unwrap();
@@ -585,13 +551,17 @@ mod tests {
                 prim: [9; LANES],
                 ..Default::default()
             };
-            bvh.intersect_packet_at(isa, shapes, rays, &mut o2);
+            intersect_packet_at(bvh, isa, shapes, rays, &mut o2);
             assert_eq!(o2.prim, out.prim, "{isa:?}");
             for l in 0..LANES {
                 let bits = |h: &PrimHit| [h.t, h.b[0], h.b[1], h.b[2]].map(f32::to_bits);
                 assert_eq!(bits(&o2.h[l]), bits(&out.h[l]), "{isa:?} lane {l}");
             }
-            assert_eq!(bvh.unoccluded_packet_at(isa, shapes, rays), free, "{isa:?}");
+            assert_eq!(
+                unoccluded_packet_at(bvh, isa, shapes, rays),
+                free,
+                "{isa:?}"
+            );
         }
         let mut n = [0; 3];
         for l in 0..LANES {
@@ -799,15 +769,13 @@ mod tests {
         if RenderIsa::Avx512.supported() {
             let now = std::time::Instant::now();
             for p in sec {
-                bvh.intersect_packet_at(RenderIsa::Avx512, shapes, p, &mut out);
+                intersect_packet_at(bvh, RenderIsa::Avx512, shapes, p, &mut out);
                 sum += out.h[0].t as f64;
             }
             t[5] = now.elapsed().as_secs_f64();
             let now = std::time::Instant::now();
             for p in shadow {
-                n += bvh
-                    .unoccluded_packet_at(RenderIsa::Avx512, shapes, p)
-                    .count_ones();
+                n += unoccluded_packet_at(bvh, RenderIsa::Avx512, shapes, p).count_ones();
             }
             t[6] = now.elapsed().as_secs_f64();
         }
