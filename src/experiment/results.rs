@@ -168,6 +168,7 @@ pub struct Manifest {
 impl Manifest {
     pub fn new(plan: &Plan, threads: usize, shard: Option<(usize, usize)>) -> Self {
         let (git_commit, git_dirty) = git_info(plan.file.parent().unwrap_or(Path::new(".")));
+        let kernel = crate::render::film::Kernel::detect();
         Self {
             experiment: plan.experiment.clone(),
             file: plan.file.clone(),
@@ -176,8 +177,8 @@ impl Manifest {
             git_dirty,
             threads,
             cpu: crate::machine::cpu().to_string(),
-            render_isa: crate::render::simd::RenderIsa::detect().name().to_string(),
-            render_packets: crate::render::film::Kernel::detect().packets,
+            render_isa: kernel.isa.name().to_string(),
+            render_packets: kernel.packets,
             shard: shard.map(|(i, n)| [i, n]),
             axes: plan.axes.clone(),
             quality: plan.quality.clone(),

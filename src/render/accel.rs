@@ -3,7 +3,7 @@
 //! notes) and the closest-hit query the integrator asks of it.
 
 use super::geometry::{PrimHit, Shape, TriRay};
-use super::ray_packet::{LaneMask, PacketHits, RayPacket, for_lanes};
+use super::ray_packet::{LaneMask, PacketHits, RayPacket, lanes};
 use super::simd::RenderIsa;
 use glam::{Vec3, Vec3A};
 use obvhs::{BvhBuildParams, bvh2::Bvh2, cwbvh::CwBvh, ray::Ray, ray::RayHit};
@@ -148,13 +148,13 @@ impl Accel {
             return intersect_packet_at(b, self.isa, &self.shapes, rays, out);
         }
         *out = PacketHits::default();
-        for_lanes(rays.active, |l| {
+        for l in lanes(rays.active) {
             let (o, d, tmax) = rays.get(l);
             if let Some(h) = self.intersect(o, d, tmax) {
                 out.prim[l] = h.prim;
                 out.h[l] = h.h;
             }
-        });
+        }
     }
 
     /// The active lanes of `rays` along which nothing blocks the ray (each
@@ -165,12 +165,12 @@ impl Accel {
             return unoccluded_packet_at(b, self.isa, &self.shapes, rays);
         }
         let mut free = 0;
-        for_lanes(rays.active, |l| {
+        for l in lanes(rays.active) {
             let (o, d, tmax) = rays.get(l);
             if self.unoccluded(o, d, tmax) {
                 free |= 1 << l;
             }
-        });
+        }
         free
     }
 }

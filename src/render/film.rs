@@ -2,7 +2,7 @@
 //! depth, parallel over image rows with per-pixel seeding.
 
 use super::integrator::{PacketScratch, PathState, Scratch, first_hit, step_packet, trace};
-use super::ray_packet::{ALL_LANES, LANES, LaneMask};
+use super::ray_packet::{ALL_LANES, LANES, LaneMask, lanes};
 use super::sampler::{BatchScramble, Sampler, SamplerKind};
 use super::sampling::Rng;
 use super::settings::RenderSettings;
@@ -428,7 +428,7 @@ impl RowJob<'_> {
                 // pixel is bit for bit what tracing them one by one gives.
                 let mut next = 0usize;
                 let mut alive: LaneMask = 0;
-                weights.iter_mut().for_each(|w| *w = None);
+                weights.fill(None);
                 loop {
                     let mut idle = !alive & ALL_LANES;
                     while idle != 0 && next < order.len() {
@@ -458,10 +458,7 @@ impl RowJob<'_> {
                     }
                     let ended =
                         step_packet(world, &mut paths, alive, s.max_bounces, &mut smps, &mut psc);
-                    let mut m = ended;
-                    while m != 0 {
-                        let lane = m.trailing_zeros() as usize;
-                        m &= m - 1;
+                    for lane in lanes(ended) {
                         let k = lane_sample[lane];
                         radiance[k * nb..(k + 1) * nb].copy_from_slice(&psc.radiance(lane)[..nb]);
                     }

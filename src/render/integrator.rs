@@ -12,7 +12,7 @@
 
 use super::accel::Hit;
 use super::geometry::offset_ray_origin;
-use super::ray_packet::{LANES, LaneMask, PacketHits, RayPacket};
+use super::ray_packet::{LANES, LaneMask, PacketHits, RayPacket, lanes};
 use super::sampler::Sampler;
 use super::sampling::{Frame, power_heuristic};
 use super::world::{LightKind, World};
@@ -392,9 +392,9 @@ pub fn trace(
 /// Per-thread buffers of a packet of paths: lane `l`'s band vectors are
 /// `[l·stride, (l+1)·stride)` of `beta`, `l` and `pend`.
 pub struct PacketScratch {
-    pub stride: usize,
-    pub beta: Vec<f32>,
-    pub l: Vec<f32>,
+    stride: usize,
+    beta: Vec<f32>,
+    l: Vec<f32>,
     pend: Vec<f32>,
     f: Vec<f32>,
     rays: RayPacket,
@@ -454,23 +454,13 @@ pub fn step_packet(
 ) -> LaneMask {
     let n = sc.stride;
     let mut ended: LaneMask = 0;
-    // Plain bit loops, no closures: a closure is compiled for the baseline
-    // instruction set, not for the render kernel's (`simd.rs`), so the
-    // shading in it would run 4 bands wide (measured: all of `scatter` in
-    // SSE code inside the AVX-512 kernel).
     sc.rays.active = 0;
-    let mut m = alive;
-    while m != 0 {
-        let i = m.trailing_zeros() as usize;
-        m &= m - 1;
+    for i in lanes(alive) {
         sc.rays.set(i, st[i].o, st[i].d, f32::INFINITY);
     }
     world.accel.intersect_packet(&sc.rays, &mut sc.hits);
     sc.shadows.active = 0;
-    let mut m = alive;
-    while m != 0 {
-        let i = m.trailing_zeros() as usize;
-        m &= m - 1;
+    for i in lanes(alive) {
         let span = i * n..(i + 1) * n;
         if sc.hits.prim[i] == u32::MAX {
             escape(world, &st[i], &sc.beta[span.clone()], &mut sc.l[span]);
@@ -500,10 +490,7 @@ pub fn step_packet(
         }
     }
     if sc.shadows.active != 0 {
-        let mut free = world.accel.unoccluded_packet(&sc.shadows);
-        while free != 0 {
-            let i = free.trailing_zeros() as usize;
-            free &= free - 1;
+        for i in lanes(world.accel.unoccluded_packet(&sc.shadows)) {
             add_pending(&mut sc.l[i * n..(i + 1) * n], &sc.pend[i * n..(i + 1) * n]);
         }
     }

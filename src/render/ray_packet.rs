@@ -20,13 +20,30 @@ pub type LaneMask = u32;
 /// Every lane set.
 pub const ALL_LANES: LaneMask = (1 << LANES) - 1;
 
-/// Call `f` for each lane set in `m`, lowest first.
+/// The lanes set in `m`, lowest first: `for l in lanes(m) { … }`.
+///
+/// An iterator, not a callback: a closure's body is compiled for the
+/// baseline instruction set, not for the `#[target_feature]` render kernel it
+/// is called from (`simd.rs`), so per-lane work in a closure ran 4 bands wide
+/// inside the AVX-512 kernel; the loop body of a `for` is the caller's code.
 #[inline(always)]
-pub fn for_lanes(mut m: LaneMask, mut f: impl FnMut(usize)) {
-    while m != 0 {
-        let l = m.trailing_zeros() as usize;
-        m &= m - 1;
-        f(l);
+pub fn lanes(m: LaneMask) -> Lanes {
+    Lanes(m)
+}
+
+/// Iterator of [`lanes`].
+pub struct Lanes(LaneMask);
+
+impl Iterator for Lanes {
+    type Item = usize;
+    #[inline(always)]
+    fn next(&mut self) -> Option<usize> {
+        if self.0 == 0 {
+            return None;
+        }
+        let l = self.0.trailing_zeros() as usize;
+        self.0 &= self.0 - 1;
+        Some(l)
     }
 }
 
