@@ -12,16 +12,14 @@
 
 use super::accel::Hit;
 use super::geometry::offset_ray_origin;
+pub use super::path::{PathState, ShadowRay};
+use super::path::{SHADOW_EPS, add_emitted, add_scaled, roulette};
 use super::ray_packet::{LANES, LaneMask, PacketHits, RayPacket, lanes};
 use super::sampler::Sampler;
 use super::sampling::{Frame, power_heuristic};
+use super::shade_packet::{LaneBands, shade_diffuse};
 use super::world::{LightKind, World};
 use glam::Vec3;
-use wide::f32x4;
-
-/// Fraction of a shadow ray's length left untested at its far end, so it does
-/// not hit the light it aims at (pbrt's ShadowEpsilon).
-const SHADOW_EPS: f32 = 1e-4;
 
 /// Per-thread buffers: one allocation per tile row, none per ray.
 pub struct Scratch {
@@ -55,69 +53,6 @@ pub fn first_hit(world: &World, o: Vec3, d: Vec3) -> Option<FirstHit> {
             t: h.h.t,
             object: world.info[h.prim as usize].object,
         })
-}
-
-/// Largest band value (at least 0), four bands at a time. For finite values
-/// the same as folding with `f32::max`; a NaN band may be ignored or returned
-/// (either way the path's non-finite result is counted and dropped).
-#[inline(always)]
-fn max_band(v: &[f32]) -> f32 {
-    let mut acc = f32x4::ZERO;
-    let mut chunks = v.chunks_exact(4);
-    for c in &mut chunks {
-        acc = acc.fast_max(f32x4::new([c[0], c[1], c[2], c[3]]));
-    }
-    let a = acc.to_array();
-    let mut m = a[0].max(a[1]).max(a[2].max(a[3]));
-    for &x in chunks.remainder() {
-        m = m.max(x);
-    }
-    m
-}
-
-#[inline(always)]
-fn add_scaled(l: &mut [f32], beta: &[f32], e: &[f32], s: f32) {
-    for ((o, &b), &x) in l.iter_mut().zip(beta).zip(e) {
-        *o += b * x * s;
-    }
-}
-
-/// One path between bounces: the ray it follows next and what its next
-/// hit needs to know (MIS state, bounce count, refraction scale, hero band).
-#[derive(Clone, Copy, Debug)]
-pub struct PathState {
-    pub o: Vec3,
-    pub d: Vec3,
-    specular: bool,
-    prev_pdf: f32,
-    eta_scale: f32,
-    depth: u32,
-    pub hero: Option<usize>,
-}
-
-impl PathState {
-    /// A path leaving the camera along `o + t·d`.
-    #[inline(always)]
-    pub fn camera(o: Vec3, d: Vec3, hero: Option<usize>) -> Self {
-        PathState {
-            o,
-            d,
-            specular: true,
-            prev_pdf: 0.0,
-            eta_scale: 1.0,
-            depth: 0,
-            hero,
-        }
-    }
-}
-
-/// A next-event shadow ray `o + t·d`, t ∈ (0, tmax), whose contribution
-/// waits in the path's pending buffer until the ray is found unblocked.
-#[derive(Clone, Copy, Debug)]
-pub struct ShadowRay {
-    pub o: Vec3,
-    pub d: Vec3,
-    pub tmax: f32,
 }
 
 /// The path escaped the scene: add what the infinite lights send along it.
@@ -165,19 +100,8 @@ pub fn scatter(
     let dlen = d.length();
     let wo_w = -d / dlen;
     // Emission.
-    if info.light != u32::MAX
-        && let LightKind::Area { le, two_sided, .. } = &world.lights[info.light as usize]
-    {
-        let cos_l = ng.dot(wo_w);
-        if cos_l > 0.0 || (*two_sided && cos_l < 0.0) {
-            let w = if st.specular {
-                1.0
-            } else {
-                let pl = world.area_light_pdf(info.light, hit.h.t * dlen, cos_l);
-                power_heuristic(st.prev_pdf, pl)
-            };
-            add_scaled(l, beta, le, w);
-        }
+    if info.light != u32::MAX {
+        add_emitted(world, st, info.light, ng.dot(wo_w), hit.h.t * dlen, beta, l);
     }
     if st.depth >= max_bounces {
         return (None, false);
@@ -325,21 +249,8 @@ pub fn scatter(
     };
     st.d = wi_w;
     st.depth += 1;
-    // Russian roulette on the throughput with refraction scaling undone.
-    let mut m = max_band(beta) * st.eta_scale;
-    if st.hero.is_some() {
-        m /= nb as f32;
-    }
-    if !(m > 0.0) {
+    if !roulette(st, nb, u_rr, beta) {
         return (shadow, false);
-    }
-    if m < 1.0 && st.depth > 1 {
-        let q = (1.0 - m).max(0.0);
-        if u_rr < q {
-            return (shadow, false);
-        }
-        let s = 1.0 / (1.0 - q);
-        beta.iter_mut().for_each(|b| *b *= s);
     }
     (shadow, true)
 }
@@ -460,15 +371,21 @@ pub fn step_packet(
     }
     world.accel.intersect_packet(&sc.rays, &mut sc.hits);
     sc.shadows.active = 0;
+    let mut together: LaneMask = 0;
     for i in lanes(alive) {
         let span = i * n..(i + 1) * n;
-        if sc.hits.prim[i] == u32::MAX {
+        let prim = sc.hits.prim[i];
+        if prim == u32::MAX {
             escape(world, &st[i], &sc.beta[span.clone()], &mut sc.l[span]);
             ended |= 1 << i;
             continue;
         }
+        if world.packet_shadable(prim) {
+            together |= 1 << i;
+            continue;
+        }
         let hit = Hit {
-            prim: sc.hits.prim[i],
+            prim,
             h: sc.hits.h[i],
         };
         let (shadow, go_on) = scatter(
@@ -488,6 +405,24 @@ pub fn step_packet(
         if !go_on {
             ended |= 1 << i;
         }
+    }
+    if together != 0 {
+        let bands = LaneBands {
+            stride: n,
+            beta: &mut sc.beta,
+            l: &mut sc.l,
+            pend: &mut sc.pend,
+        };
+        ended |= shade_diffuse(
+            world,
+            st,
+            &sc.hits,
+            together,
+            max_bounces,
+            smp,
+            bands,
+            &mut sc.shadows,
+        );
     }
     if sc.shadows.active != 0 {
         for i in lanes(world.accel.unoccluded_packet(&sc.shadows)) {

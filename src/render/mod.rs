@@ -82,10 +82,12 @@ pub mod geometry;
 pub mod integrator;
 mod lanes;
 pub mod output;
+pub mod path;
 pub mod ray_packet;
 pub mod sampler;
 pub mod sampling;
 pub mod settings;
+mod shade_packet;
 pub mod simd;
 pub mod world;
 

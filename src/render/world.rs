@@ -80,6 +80,12 @@ pub struct World {
     /// shapes), computed once at build: the same operations as
     /// `Shape::surface`, so results are unchanged.
     tri_ng: Vec<Vec3>,
+    /// Per primitive: a triangle with a Lambertian material and no shading
+    /// normals, which `shade_packet` shades with the packet's other such hits.
+    diffuse_tri: Vec<bool>,
+    /// Every light is an area light on a triangle (or there is none): what
+    /// `shade_packet`'s light sampling handles.
+    triangle_lights: bool,
     pub bsdfs: Vec<Bsdf>,
     pub lights: Vec<LightKind>,
     pub light_pmf: Vec<f32>,
@@ -440,8 +446,23 @@ impl World {
                 _ => Vec3::ZERO,
             })
             .collect();
+        let diffuse_tri = shapes
+            .iter()
+            .zip(&info)
+            .map(|(s, i)| {
+                matches!(s, Shape::Triangle { .. })
+                    && i.normals == u32::MAX
+                    && matches!(bsdfs[i.material as usize], Bsdf::Diffuse { .. })
+            })
+            .collect();
+        let triangle_lights = lights.iter().all(|l| {
+            matches!(l, LightKind::Area { prim, .. }
+                if matches!(shapes[*prim as usize], Shape::Triangle { .. }))
+        });
         Ok(World {
             accel: Accel::build(shapes, kind),
+            diffuse_tri,
+            triangle_lights,
             info,
             normals,
             tri_ng,
@@ -471,6 +492,28 @@ impl World {
         }
     }
 
+    /// Whether a hit on `prim` can be shaded by `shade_packet`: a Lambertian
+    /// triangle without shading normals, in a world whose lights are all
+    /// triangle area lights.
+    #[inline(always)]
+    pub(super) fn packet_shadable(&self, prim: u32) -> bool {
+        self.triangle_lights && self.diffuse_tri[prim as usize]
+    }
+
+    /// Unit geometric normal of triangle primitive `prim`.
+    #[inline(always)]
+    pub(super) fn triangle_normal(&self, prim: u32) -> Vec3 {
+        self.tri_ng[prim as usize]
+    }
+
+    /// The light that draw `u0` selects and its selection probability.
+    /// Needs at least one light.
+    #[inline(always)]
+    pub(super) fn choose_light(&self, u0: f32) -> (usize, f32) {
+        let idx = sample_cdf(&self.light_cdf, u0);
+        (idx, self.light_pmf[idx])
+    }
+
     /// Pick a light and sample a direction to it from point `p`. The sample
     /// references the light's spectrum: radiance arriving at `p` (unoccluded)
     /// is `scale · spec`.
@@ -479,8 +522,7 @@ impl World {
         if self.lights.is_empty() {
             return None;
         }
-        let idx = sample_cdf(&self.light_cdf, u0);
-        let sel = self.light_pmf[idx];
+        let (idx, sel) = self.choose_light(u0);
         if !(sel > 0.0) {
             return None;
         }

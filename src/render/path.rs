@@ -1,0 +1,129 @@
+//! One path between bounces: the state a path carries from one hit to the
+//! next (its ray, MIS state, bounce count, refraction scale, hero band), the
+//! next-event shadow ray a bounce may leave to test, and the band arithmetic
+//! on a path's throughput that every bounce does, whether one path is shaded
+//! at a time (`integrator::scatter`) or a packet's diffuse hits together
+//! (`shade_packet`).
+
+use super::sampling::power_heuristic;
+use super::world::{LightKind, World};
+use glam::Vec3;
+use wide::f32x4;
+
+/// Fraction of a shadow ray's length left untested at its far end, so it does
+/// not hit the light it aims at (pbrt's ShadowEpsilon).
+pub(super) const SHADOW_EPS: f32 = 1e-4;
+
+/// Largest band value (at least 0), four bands at a time. For finite values
+/// the same as folding with `f32::max`; a NaN band may be ignored or returned
+/// (either way the path's non-finite result is counted and dropped).
+#[inline(always)]
+fn max_band(v: &[f32]) -> f32 {
+    let mut acc = f32x4::ZERO;
+    let mut chunks = v.chunks_exact(4);
+    for c in &mut chunks {
+        acc = acc.fast_max(f32x4::new([c[0], c[1], c[2], c[3]]));
+    }
+    let a = acc.to_array();
+    let mut m = a[0].max(a[1]).max(a[2].max(a[3]));
+    for &x in chunks.remainder() {
+        m = m.max(x);
+    }
+    m
+}
+
+#[inline(always)]
+pub(super) fn add_scaled(l: &mut [f32], beta: &[f32], e: &[f32], s: f32) {
+    for ((o, &b), &x) in l.iter_mut().zip(beta).zip(e) {
+        *o += b * x * s;
+    }
+}
+
+/// One path between bounces: the ray it follows next and what its next
+/// hit needs to know (MIS state, bounce count, refraction scale, hero band).
+#[derive(Clone, Copy, Debug)]
+pub struct PathState {
+    pub o: Vec3,
+    pub d: Vec3,
+    pub(super) specular: bool,
+    pub(super) prev_pdf: f32,
+    pub(super) eta_scale: f32,
+    pub(super) depth: u32,
+    pub hero: Option<usize>,
+}
+
+impl PathState {
+    /// A path leaving the camera along `o + t·d`.
+    #[inline(always)]
+    pub fn camera(o: Vec3, d: Vec3, hero: Option<usize>) -> Self {
+        PathState {
+            o,
+            d,
+            specular: true,
+            prev_pdf: 0.0,
+            eta_scale: 1.0,
+            depth: 0,
+            hero,
+        }
+    }
+}
+
+/// A next-event shadow ray `o + t·d`, t ∈ (0, tmax), whose contribution
+/// waits in the path's pending buffer until the ray is found unblocked.
+#[derive(Clone, Copy, Debug)]
+pub struct ShadowRay {
+    pub o: Vec3,
+    pub d: Vec3,
+    pub tmax: f32,
+}
+
+/// The path's ray hit area light `light` at distance `dist` (along the ray,
+/// in scene units) where the cosine between the light's normal and the
+/// direction back along the ray is `cos_l`: add what it emits, MIS-weighted
+/// against the next-event estimate of the bounce before, to `l`.
+#[inline(always)]
+pub(super) fn add_emitted(
+    world: &World,
+    st: &PathState,
+    light: u32,
+    cos_l: f32,
+    dist: f32,
+    beta: &[f32],
+    l: &mut [f32],
+) {
+    if let LightKind::Area { le, two_sided, .. } = &world.lights[light as usize]
+        && (cos_l > 0.0 || (*two_sided && cos_l < 0.0))
+    {
+        let w = if st.specular {
+            1.0
+        } else {
+            let pl = world.area_light_pdf(light, dist, cos_l);
+            power_heuristic(st.prev_pdf, pl)
+        };
+        add_scaled(l, beta, le, w);
+    }
+}
+
+/// Russian roulette on the throughput `beta` (with refraction scaling undone;
+/// `nb` bands, a hero path's one band scaled by `nb`) after the bounce that
+/// made `st.depth`, with draw `u_rr`: false when the path ends, else the
+/// survivor's throughput is scaled up by 1/(1 − q).
+#[inline(always)]
+pub(super) fn roulette(st: &PathState, nb: usize, u_rr: f32, beta: &mut [f32]) -> bool {
+    let mut m = max_band(beta) * st.eta_scale;
+    if st.hero.is_some() {
+        m /= nb as f32;
+    }
+    if !(m > 0.0) {
+        return false;
+    }
+    if m < 1.0 && st.depth > 1 {
+        let q = (1.0 - m).max(0.0);
+        if u_rr < q {
+            return false;
+        }
+        let s = 1.0 / (1.0 - q);
+        beta.iter_mut().for_each(|b| *b *= s);
+    }
+    true
+}

@@ -1,0 +1,346 @@
+//! One bounce of a packet's Lambertian hits, shaded together in structure of
+//! arrays (issue 17 item 1): the hit point and its error bound, the shading
+//! frame, the offset ray origins, the light sample on a triangle area light
+//! with its MIS weight and shadow ray, and the cosine-weighted BSDF sample,
+//! each computed for all sixteen lanes at once by a plain lane loop that the
+//! render kernel's per-instruction-set copies (`simd.rs`) run 16, 8 or 4
+//! lanes per instruction. What stays lane by lane is what is per lane by
+//! nature: the table lookups (triangle, light choice), the sampler's draws,
+//! emission (only lanes that hit an emitter) and the band vectors
+//! (next-event contribution, throughput, Russian roulette).
+//!
+//! Which hits: a triangle with a `Diffuse` material and no shading normals,
+//! in a world whose lights are all area lights on triangles
+//! (`World::packet_shadable`). Every other hit goes through
+//! `integrator::scatter` one lane at a time.
+//!
+//! Same bits as `scatter`: each lane loop calls the very scalar functions
+//! `scatter` calls (`triangle_point`, `Frame`, `offset_ray_origin`,
+//! `cosine_hemisphere`, `uniform_triangle`, `power_heuristic`, glam's `Vec3`
+//! operations) in the same order; sqrt, division, multiplication and addition
+//! are correctly rounded IEEE operations in every vector width and Rust never
+//! contracts them into FMAs, and the one transcendental (sin/cos in the disk
+//! map) is the project's own polynomial. The lanes take the same draws in the
+//! same order as `scatter` (light choice, light position, lobe, direction,
+//! roulette). A branch `scatter` takes becomes a lane mask here: both sides
+//! are computed, the lane keeps the side its own values choose.
+//! `film::tests::every_isa_level_renders_the_same_bits` renders every
+//! instruction-set level one path at a time and in packets and compares the
+//! bits.
+
+// Lane loops index several per-lane arrays at once.
+#![allow(clippy::needless_range_loop)]
+
+use super::bsdf::Bsdf;
+use super::geometry::{HIT_POINT_GAMMA, Shape, offset_ray_origin, triangle_point};
+use super::path::{PathState, SHADOW_EPS, add_emitted, roulette};
+use super::ray_packet::{LANES, LaneMask, PacketHits, RayPacket, lanes};
+use super::sampler::Sampler;
+use super::sampling::{Frame, cosine_hemisphere, power_heuristic, uniform_triangle};
+use super::world::{LightKind, World};
+use glam::Vec3;
+use std::f32::consts::PI;
+
+/// Sixteen `Vec3`s, one per lane, as three component arrays.
+#[derive(Clone, Copy)]
+#[repr(C, align(64))]
+struct Lanes3 {
+    x: [f32; LANES],
+    y: [f32; LANES],
+    z: [f32; LANES],
+}
+
+impl Lanes3 {
+    /// Every lane `v`.
+    #[inline(always)]
+    fn splat(v: Vec3) -> Self {
+        Lanes3 {
+            x: [v.x; LANES],
+            y: [v.y; LANES],
+            z: [v.z; LANES],
+        }
+    }
+    #[inline(always)]
+    fn get(&self, l: usize) -> Vec3 {
+        Vec3::new(self.x[l], self.y[l], self.z[l])
+    }
+    #[inline(always)]
+    fn set(&mut self, l: usize, v: Vec3) {
+        self.x[l] = v.x;
+        self.y[l] = v.y;
+        self.z[l] = v.z;
+    }
+}
+
+/// A packet's band vectors: lane `l`'s throughput, radiance and pending
+/// next-event contribution are `[l·stride, (l+1)·stride)` of each.
+pub(super) struct LaneBands<'a> {
+    pub stride: usize,
+    pub beta: &'a mut [f32],
+    pub l: &'a mut [f32],
+    pub pend: &'a mut [f32],
+}
+
+/// Shade the hits of the lanes in `todo` (each `World::packet_shadable`):
+/// what `scatter` does for each of them, with the next-event shadow rays put
+/// in `shadows` and their contributions in `bands.pend`, as `scatter` does
+/// with a pending buffer. Returns the lanes whose paths ended.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(super) fn shade_diffuse(
+    world: &World,
+    st: &mut [PathState; LANES],
+    hits: &PacketHits,
+    todo: LaneMask,
+    max_bounces: u32,
+    smp: &mut [Sampler],
+    bands: LaneBands<'_>,
+    shadows: &mut RayPacket,
+) -> LaneMask {
+    let LaneBands {
+        stride,
+        beta,
+        l: rad,
+        pend,
+    } = bands;
+    // Lanes outside `todo` keep a harmless unit triangle and ray.
+    let mut v = [
+        Lanes3::splat(Vec3::ZERO),
+        Lanes3::splat(Vec3::X),
+        Lanes3::splat(Vec3::Y),
+    ];
+    let mut bary = [[1.0f32; LANES], [0.0; LANES], [0.0; LANES]];
+    let mut ng = Lanes3::splat(Vec3::Z);
+    let mut dir = Lanes3::splat(-Vec3::Z);
+    // The bounce's draws, in `scatter`'s order.
+    let (mut u1, mut u2) = ([0.5f32; LANES], [0.5f32; LANES]);
+    let (mut v1, mut v2, mut u_rr) = ([0.5f32; LANES], [0.5f32; LANES], [0f32; LANES]);
+    let mut u_light = [0f32; LANES];
+    let mut ended: LaneMask = 0;
+    let mut go: LaneMask = 0;
+    for i in lanes(todo) {
+        let prim = hits.prim[i];
+        let Shape::Triangle { p } = world.accel.shapes[prim as usize] else {
+            unreachable!("shade_diffuse is given triangles only (World::packet_shadable)")
+        };
+        for (k, vk) in v.iter_mut().enumerate() {
+            vk.set(i, p[k]);
+            bary[k][i] = hits.h[i].b[k];
+        }
+        ng.set(i, world.triangle_normal(prim));
+        dir.set(i, st[i].d);
+        let s = &mut st[i];
+        let info = world.info[prim as usize];
+        if info.light != u32::MAX {
+            let d = s.d;
+            let dlen = d.length();
+            let wo_w = -d / dlen;
+            let span = i * stride..(i + 1) * stride;
+            let ng_i = world.triangle_normal(prim);
+            add_emitted(
+                world,
+                s,
+                info.light,
+                ng_i.dot(wo_w),
+                hits.h[i].t * dlen,
+                &beta[span.clone()],
+                &mut rad[span],
+            );
+        }
+        if s.depth >= max_bounces {
+            ended |= 1 << i;
+            continue;
+        }
+        go |= 1 << i;
+        let sm = &mut smp[i];
+        u_light[i] = sm.get1d();
+        (u1[i], u2[i]) = sm.get2d();
+        let _u_lobe = sm.get1d();
+        (v1[i], v2[i]) = sm.get2d();
+        u_rr[i] = sm.get1d();
+    }
+    if go == 0 {
+        return ended;
+    }
+
+    // The hit, its frame, the BSDF sample and the continuation ray, all lanes.
+    let mut pt = Lanes3::splat(Vec3::ZERO);
+    let mut ng_s = Lanes3::splat(Vec3::Z);
+    let mut fs = Lanes3::splat(Vec3::X);
+    let mut ft = Lanes3::splat(Vec3::Y);
+    let mut origin_front = Lanes3::splat(Vec3::ZERO);
+    let mut next_o = Lanes3::splat(Vec3::ZERO);
+    let mut next_d = Lanes3::splat(Vec3::Z);
+    let mut wo_z = [0f32; LANES];
+    let mut bsdf_pdf = [0f32; LANES];
+    let mut cont = [false; LANES];
+    for l in 0..LANES {
+        let (p, p_err) = triangle_point(
+            &[v[0].get(l), v[1].get(l), v[2].get(l)],
+            [bary[0][l], bary[1][l], bary[2][l]],
+            HIT_POINT_GAMMA,
+        );
+        let d = dir.get(l);
+        let dlen = d.length();
+        let wo_w = -d / dlen;
+        let n = ng.get(l);
+        // Opaque: face the normal towards wo.
+        let n_s = if n.dot(wo_w) < 0.0 { -n } else { n };
+        let frame = Frame::from_normal(n_s);
+        let wo = frame.to_local(wo_w);
+        let front = offset_ray_origin(p, p_err, n_s, n_s);
+        let wi = cosine_hemisphere(v1[l], v2[l]);
+        let pdf = wi.z / PI;
+        let wi_w = frame.to_world(wi).normalize();
+        let same_side = wi_w.dot(n_s) * wo_w.dot(n_s) > 0.0;
+        let refl_local = wi.z * wo.z > 0.0;
+        cont[l] = !(wi.z <= 0.0 || wo.z <= 0.0)
+            && (pdf > 0.0 && pdf.is_finite())
+            && same_side == refl_local;
+        let o_next = if wi_w.dot(n_s) >= 0.0 {
+            front
+        } else {
+            offset_ray_origin(p, p_err, n_s, wi_w)
+        };
+        pt.set(l, p);
+        ng_s.set(l, n_s);
+        fs.set(l, frame.s);
+        ft.set(l, frame.t);
+        origin_front.set(l, front);
+        next_o.set(l, o_next);
+        next_d.set(l, wi_w);
+        wo_z[l] = wo.z;
+        bsdf_pdf[l] = pdf;
+    }
+
+    // The light each lane samples (next-event estimation needs wo.z > 0).
+    let mut lv = [
+        Lanes3::splat(Vec3::ZERO),
+        Lanes3::splat(Vec3::X),
+        Lanes3::splat(Vec3::Y),
+    ];
+    let mut nl = Lanes3::splat(Vec3::Z);
+    let (mut sel, mut area) = ([1f32; LANES], [1f32; LANES]);
+    let mut two_sided = [false; LANES];
+    let mut light = [0usize; LANES];
+    let mut nee: LaneMask = 0;
+    if !world.lights.is_empty() {
+        for i in lanes(go) {
+            if !(wo_z[i] > 0.0) {
+                continue;
+            }
+            let (idx, s) = world.choose_light(u_light[i]);
+            if !(s > 0.0) {
+                continue;
+            }
+            let LightKind::Area {
+                prim,
+                two_sided: ts,
+                area: a,
+                ..
+            } = world.lights[idx]
+            else {
+                unreachable!("shade_diffuse samples triangle area lights only")
+            };
+            let Shape::Triangle { p } = world.accel.shapes[prim as usize] else {
+                unreachable!("shade_diffuse samples triangle area lights only")
+            };
+            for (k, vk) in lv.iter_mut().enumerate() {
+                vk.set(i, p[k]);
+            }
+            nl.set(i, world.triangle_normal(prim));
+            (sel[i], area[i], two_sided[i], light[i]) = (s, a, ts, idx);
+            nee |= 1 << i;
+        }
+    }
+    let mut shadow_d = Lanes3::splat(Vec3::Z);
+    let mut tmax = [0f32; LANES];
+    let mut scale = [0f32; LANES];
+    let mut unblocked_adds = [false; LANES];
+    if nee != 0 {
+        for l in 0..LANES {
+            let (b0, b1, b2) = uniform_triangle(u1[l], u2[l]);
+            let (pl, err_l) =
+                triangle_point(&[lv[0].get(l), lv[1].get(l), lv[2].get(l)], [b0, b1, b2], 6);
+            let n_l = nl.get(l);
+            let d = pl - pt.get(l);
+            let dist2 = d.length_squared();
+            let wi = d / dist2.sqrt();
+            let c = -n_l.dot(wi);
+            let cos_l = c.abs();
+            let pdf = sel[l] * dist2 / (cos_l * area[l]);
+            // `c > 0.0 || two_sided` is `sample_light`'s `!(c <= 0.0 && !two_sided)`
+            // but for a NaN `c`, which `cos_l > 0.0` rejects either way.
+            let light_ok = dist2 > 0.0
+                && (c > 0.0 || two_sided[l])
+                && cos_l > 0.0
+                && pdf > 0.0
+                && pdf.is_finite();
+            let n_s = ng_s.get(l);
+            let frame = Frame {
+                s: fs.get(l),
+                t: ft.get(l),
+                n: n_s,
+            };
+            let wil = frame.to_local(wi);
+            let facing = wil.z > 0.0 && wi.dot(n_s) > 0.0;
+            let tgt = if n_l == Vec3::ZERO {
+                pl
+            } else {
+                offset_ray_origin(pl, err_l, n_l, -wi)
+            };
+            let dv = tgt - origin_front.get(l);
+            let len = dv.length();
+            let pdf_b = wil.z / PI;
+            let w = power_heuristic(pdf, pdf_b);
+            unblocked_adds[l] = light_ok && facing && len > 0.0;
+            shadow_d.set(l, dv / len);
+            tmax[l] = len * (1.0 - SHADOW_EPS);
+            scale[l] = wil.z * w / pdf;
+        }
+    }
+
+    // Per lane: the band vectors and the path's state.
+    let nb = world.bands;
+    for i in lanes(go) {
+        let span = i * stride..(i + 1) * stride;
+        let Bsdf::Diffuse { r } = &world.bsdfs[world.info[hits.prim[i] as usize].material as usize]
+        else {
+            unreachable!("shade_diffuse is given Lambertian hits only (World::packet_shadable)")
+        };
+        if nee & (1 << i) != 0 && unblocked_adds[i] {
+            let LightKind::Area { le, .. } = &world.lights[light[i]] else {
+                unreachable!("shade_diffuse samples area lights only")
+            };
+            let s = scale[i];
+            for (((o, &b), &ri), &e) in pend[span.clone()]
+                .iter_mut()
+                .zip(&beta[span.clone()])
+                .zip(r)
+                .zip(le)
+            {
+                let f = ri * (1.0 / PI);
+                *o = b * f * e * s;
+            }
+            shadows.set(i, origin_front.get(i), shadow_d.get(i), tmax[i]);
+        }
+        if !cont[i] {
+            ended |= 1 << i;
+            continue;
+        }
+        let b = &mut beta[span];
+        for (x, &ri) in b.iter_mut().zip(r) {
+            *x *= ri;
+        }
+        let s = &mut st[i];
+        s.specular = false;
+        s.prev_pdf = bsdf_pdf[i];
+        s.o = next_o.get(i);
+        s.d = next_d.get(i);
+        s.depth += 1;
+        if !roulette(s, nb, u_rr[i], b) {
+            ended |= 1 << i;
+        }
+    }
+    ended
+}
