@@ -339,191 +339,327 @@ impl RowJob<'_> {
         Some((PathState::camera(o, d, hero), weight))
     }
 
+    /// Label and depth of pixel `ix` of the row `py` from the ray through the
+    /// pixel centre, pupil centre, and the pixel's PCG32 key.
+    #[inline(always)]
+    fn pixel_start(&self, ix: usize, py: u32, lab: &mut [u32], dep: &mut [f32]) -> u64 {
+        let (film, camera) = (self.film, self.camera);
+        let px = self.roi.x + ix as u32;
+        let pixel_id = py as u64 * film.width_px as u64 + px as u64;
+        let fc = DVec2::new(
+            (px as f64 + 0.5 - film.width_px as f64 / 2.0) * film.pixel_pitch_m,
+            (film.height_px as f64 / 2.0 - (py as f64 + 0.5)) * film.pixel_pitch_m,
+        );
+        if let Some((o, d, _)) =
+            camera_ray(camera, self.to_world, fc, DVec2::splat(0.5), self.mid_nm)
+            && let Some(h) = first_hit(self.world, o, d)
+        {
+            lab[ix] = h.object;
+            dep[ix] = h.t;
+        }
+        Rng::pixel_key(self.s.seed, pixel_id)
+    }
+
+    /// The scrambles of a pixel's batches (none for the independent sampler).
+    #[inline(always)]
+    fn pixel_scrambles(&self, pixel_key: u64, out: &mut Vec<BatchScramble>) {
+        out.clear();
+        if self.s.sampler == SamplerKind::Sobol {
+            out.extend((0..self.batches).map(|bi| {
+                BatchScramble::new(
+                    pixel_key,
+                    bi as u64,
+                    batch_len(self.s.spp, self.batches, bi),
+                )
+            }));
+        }
+    }
+
     /// One image row: every sample of every pixel, then the pixel means and
     /// standard errors. Returns the non-finite sample count and the weighted
     /// standard errors.
     #[inline(always)]
     fn row(&self, ((((row, irr), se), lab), dep): RowSlices) -> (u64, Vec<f32>) {
-        let RowJob {
-            world,
-            camera,
-            to_world,
-            film,
-            s,
-            roi,
-            batches,
-            mid_nm,
-            wsets,
-            packets,
-            ..
-        } = *self;
+        let (world, s, roi, batches) = (self.world, self.s, self.roi, self.batches);
         let nb = world.bands;
-        let nsets = wsets.len();
-        let (fw, fh, pitch) = (
-            film.width_px as f64,
-            film.height_px as f64,
-            film.pixel_pitch_m,
-        );
-        let mut wse = vec![
-            0f32;
-            if batches > 1 {
-                roi.w as usize * nsets
-            } else {
-                0
-            }
-        ];
+        let nsets = self.wsets.len();
+        let mut out = PixelOut {
+            irr,
+            se,
+            wse: vec![
+                0f32;
+                if batches > 1 {
+                    roi.w as usize * nsets
+                } else {
+                    0
+                }
+            ],
+            mean_px: vec![0.0f64; nb],
+            ss_px: vec![0.0f64; nb],
+            acc: vec![0.0f64; nb * batches],
+            counts: (0..batches)
+                .map(|bi| batch_len(s.spp, batches, bi) as u32)
+                .collect(),
+            nan: 0,
+        };
         let py = roi.y + row as u32;
-        let nbp = world.bands_padded;
-        let mut sc = Scratch::new(nbp);
-        let mut psc = PacketScratch::new(if packets { nbp } else { 0 });
-        // Batch bi holds samples bi, bi + batches, …: (spp − bi)/batches of them.
-        let batch_len = |bi: usize| (s.spp as usize - bi).div_ceil(batches);
         // (batch, index in batch) of the pixel's samples in accumulation order.
         let order: Vec<(u32, u32)> = (0..batches)
-            .flat_map(|bi| (0..batch_len(bi)).map(move |j| (bi as u32, j as u32)))
+            .flat_map(|bi| (0..batch_len(s.spp, batches, bi)).map(move |j| (bi as u32, j as u32)))
             .collect();
-        let mut scrambles: Vec<BatchScramble> = Vec::with_capacity(batches);
+        if self.packets {
+            self.row_packets(py, &order, lab, dep, &mut out);
+        } else {
+            let mut sc = Scratch::new(world.bands_padded);
+            let mut smp = Sampler::independent(Rng::for_sample(0, 0, 0));
+            let mut scrambles: Vec<BatchScramble> = Vec::with_capacity(batches);
+            for ix in 0..roi.w as usize {
+                let px = roi.x + ix as u32;
+                let pixel_key = self.pixel_start(ix, py, lab, dep);
+                self.pixel_scrambles(pixel_key, &mut scrambles);
+                out.acc.fill(0.0);
+                for &(bi, j) in &order {
+                    if let Some((st, w)) = self.start_sample(
+                        px,
+                        py,
+                        pixel_key,
+                        &scrambles,
+                        (bi, j),
+                        &mut smp,
+                        &mut sc.beta,
+                    ) {
+                        trace(world, st.o, st.d, s.max_bounces, st.hero, &mut smp, &mut sc);
+                        let a = &mut out.acc[bi as usize * nb..(bi as usize + 1) * nb];
+                        out.nan += accumulate(a, &sc.l[..nb], w);
+                    }
+                }
+                self.finish_pixel(ix, &mut out);
+            }
+        }
+        (out.nan, out.wse)
+    }
+
+    /// The row's pixels traced 16 paths at a time (`step_packet`) as one
+    /// stream of samples: pixel by pixel, each pixel's samples in batch
+    /// order, and a lane whose path ends takes the next sample of the stream
+    /// at once, of the same pixel or of the next ones, so the packets stay
+    /// full across pixel boundaries. Each sample's radiance waits in its
+    /// pixel's slot until all the pixel's samples are traced; then the
+    /// samples are accumulated in order and the pixel finished: every pixel
+    /// is bit for bit what tracing its samples one by one gives.
+    #[inline(always)]
+    fn row_packets(
+        &self,
+        py: u32,
+        order: &[(u32, u32)],
+        lab: &mut [u32],
+        dep: &mut [f32],
+        out: &mut PixelOut<'_>,
+    ) {
+        let (world, s) = (self.world, self.s);
+        let nb = world.bands;
+        let mut psc = PacketScratch::new(world.bands_padded);
         let mut smps: Vec<Sampler> = (0..LANES)
             .map(|_| Sampler::independent(Rng::for_sample(0, 0, 0)))
             .collect();
         let mut paths = [PathState::camera(Vec3::ZERO, Vec3::Z, None); LANES];
-        // Packets: each sample's camera weight (`None`: vignetted), the
-        // sample each lane traces, and each sample's radiance.
-        let mut weights: Vec<Option<f64>> = vec![None; if packets { order.len() } else { 0 }];
+        // Pixels in flight (slots reused through `free`), the slot and
+        // sample each lane traces.
+        let mut slots: Vec<PixelSlot> = Vec::new();
+        let mut free: Vec<usize> = Vec::new();
+        let mut lane_slot = [0usize; LANES];
         let mut lane_sample = [0usize; LANES];
-        let mut radiance = vec![0.0f32; if packets { order.len() * nb } else { 0 }];
-        let mut acc = vec![0.0f64; nb * batches];
-        let mut counts = vec![0u32; batches];
-        let mut mean_px = vec![0.0f64; nb];
-        let mut ss_px = vec![0.0f64; nb];
-        let mut nan = 0u64;
-        for ix in 0..roi.w as usize {
-            let px = roi.x + ix as u32;
-            let pixel_id = py as u64 * film.width_px as u64 + px as u64;
-            // Label and depth from the ray through the pixel centre, pupil centre.
-            let fc = DVec2::new(
-                (px as f64 + 0.5 - fw / 2.0) * pitch,
-                (fh / 2.0 - (py as f64 + 0.5)) * pitch,
-            );
-            if let Some((o, d, _)) = camera_ray(camera, to_world, fc, DVec2::splat(0.5), mid_nm)
-                && let Some(h) = first_hit(world, o, d)
-            {
-                lab[ix] = h.object;
-                dep[ix] = h.t;
-            }
-            let pixel_key = Rng::pixel_key(s.seed, pixel_id);
-            acc.iter_mut().for_each(|x| *x = 0.0);
-            counts.iter_mut().for_each(|x| *x = 0);
-            scrambles.clear();
-            if s.sampler == SamplerKind::Sobol {
-                scrambles.extend(
-                    (0..batches).map(|bi| BatchScramble::new(pixel_key, bi as u64, batch_len(bi))),
-                );
-            }
-            if packets {
-                // The pixel's samples in batch order, LANES paths traced
-                // together; a lane whose path ends takes the next sample at
-                // once. Each sample's radiance waits in `radiance` until all
-                // are traced, then the samples are accumulated in order: the
-                // pixel is bit for bit what tracing them one by one gives.
-                let mut next = 0usize;
-                let mut alive: LaneMask = 0;
-                weights.fill(None);
-                loop {
-                    let mut idle = !alive & ALL_LANES;
-                    while idle != 0 && next < order.len() {
-                        let lane = idle.trailing_zeros() as usize;
-                        let (bi, j) = order[next];
-                        counts[bi as usize] += 1;
-                        if let Some((st, w)) = self.start_sample(
-                            px,
-                            py,
-                            pixel_key,
-                            &scrambles,
-                            (bi, j),
-                            &mut smps[lane],
-                            psc.beta_mut(lane),
-                        ) {
-                            paths[lane] = st;
-                            weights[next] = Some(w);
-                            lane_sample[lane] = next;
-                            psc.clear_radiance(lane);
-                            alive |= 1 << lane;
-                            idle &= idle - 1;
-                        }
-                        next += 1;
+        // The pixel whose samples are being issued, and its slot.
+        let mut next_ix = 0usize;
+        let mut issuing: Option<usize> = None;
+        let mut alive: LaneMask = 0;
+        loop {
+            let mut idle = !alive & ALL_LANES;
+            while idle != 0 {
+                let k = match issuing {
+                    Some(k) => k,
+                    None if next_ix < self.roi.w as usize => {
+                        let k = free.pop().unwrap_or_else(|| {
+                            slots.push(PixelSlot::default());
+                            slots.len() - 1
+                        });
+                        let pixel_key = self.pixel_start(next_ix, py, lab, dep);
+                        let slot = &mut slots[k];
+                        slot.ix = next_ix;
+                        slot.pixel_key = pixel_key;
+                        self.pixel_scrambles(pixel_key, &mut slot.scrambles);
+                        slot.next = 0;
+                        slot.tracing = 0;
+                        slot.weights.clear();
+                        slot.weights.resize(order.len(), None);
+                        slot.radiance.resize(order.len() * nb, 0.0);
+                        next_ix += 1;
+                        issuing = Some(k);
+                        k
                     }
-                    if alive == 0 {
-                        break;
-                    }
-                    let ended =
-                        step_packet(world, &mut paths, alive, s.max_bounces, &mut smps, &mut psc);
-                    for lane in lanes(ended) {
-                        let k = lane_sample[lane];
-                        radiance[k * nb..(k + 1) * nb].copy_from_slice(&psc.radiance(lane)[..nb]);
-                    }
-                    alive &= !ended;
+                    None => break,
+                };
+                let slot = &mut slots[k];
+                let lane = idle.trailing_zeros() as usize;
+                let n = slot.next;
+                slot.next += 1;
+                let px = self.roi.x + slot.ix as u32;
+                if let Some((st, w)) = self.start_sample(
+                    px,
+                    py,
+                    slot.pixel_key,
+                    &slot.scrambles,
+                    order[n],
+                    &mut smps[lane],
+                    psc.beta_mut(lane),
+                ) {
+                    paths[lane] = st;
+                    slot.weights[n] = Some(w);
+                    slot.tracing += 1;
+                    lane_slot[lane] = k;
+                    lane_sample[lane] = n;
+                    psc.clear_radiance(lane);
+                    alive |= 1 << lane;
+                    idle &= idle - 1;
                 }
-                for (k, &(bi, _)) in order.iter().enumerate() {
-                    if let Some(w) = weights[k] {
-                        let a = &mut acc[bi as usize * nb..(bi as usize + 1) * nb];
-                        nan += accumulate(a, &radiance[k * nb..(k + 1) * nb], w);
-                    }
-                }
-            } else {
-                for &(bi, j) in &order {
-                    counts[bi as usize] += 1;
-                    let smp = &mut smps[0];
-                    if let Some((st, w)) =
-                        self.start_sample(px, py, pixel_key, &scrambles, (bi, j), smp, &mut sc.beta)
-                    {
-                        trace(world, st.o, st.d, s.max_bounces, st.hero, smp, &mut sc);
-                        let a = &mut acc[bi as usize * nb..(bi as usize + 1) * nb];
-                        nan += accumulate(a, &sc.l[..nb], w);
+                if slot.next == order.len() {
+                    issuing = None;
+                    if slot.tracing == 0 {
+                        self.finish_slot(slot, order, out);
+                        free.push(k);
                     }
                 }
             }
-            // Mean and standard error from the batch means. Totals add the
-            // batches in order 0, 1, … for every band.
-            let n = s.spp as f64;
-            let irr_px = &mut irr[ix * nb..(ix + 1) * nb];
-            mean_px.fill(0.0);
-            for a in acc.chunks_exact(nb) {
-                for (t, &x) in mean_px.iter_mut().zip(a) {
-                    *t += x;
+            if alive == 0 {
+                break;
+            }
+            let ended = step_packet(world, &mut paths, alive, s.max_bounces, &mut smps, &mut psc);
+            for lane in lanes(ended) {
+                let (k, n) = (lane_slot[lane], lane_sample[lane]);
+                let slot = &mut slots[k];
+                slot.radiance[n * nb..(n + 1) * nb].copy_from_slice(&psc.radiance(lane)[..nb]);
+                slot.tracing -= 1;
+                if slot.tracing == 0 && slot.next == order.len() {
+                    self.finish_slot(slot, order, out);
+                    free.push(k);
                 }
             }
-            for (m, o) in mean_px.iter_mut().zip(irr_px.iter_mut()) {
-                *m /= n;
-                *o = *m as f32;
-            }
-            if batches > 1 {
-                ss_px.fill(0.0);
-                for (a, &c) in acc.chunks_exact(nb).zip(&counts) {
-                    let c = c.max(1) as f64;
-                    for ((q, &x), &mean) in ss_px.iter_mut().zip(a).zip(mean_px.iter()) {
-                        let m = x / c;
-                        *q += (m - mean) * (m - mean);
-                    }
-                }
-                let denom = batches as f64 * (batches as f64 - 1.0);
-                for (o, &q) in se[ix * nb..(ix + 1) * nb].iter_mut().zip(ss_px.iter()) {
-                    *o = (q / denom).sqrt() as f32;
-                }
-                for (k, w) in wsets.iter().enumerate() {
-                    let mw: f64 = w.iter().zip(&mean_px).map(|(&a, &m)| a as f64 * m).sum();
-                    let mut q = 0.0f64;
-                    for (a, &c) in acc.chunks_exact(nb).zip(&counts) {
-                        let c = c.max(1) as f64;
-                        let m: f64 = w.iter().zip(a).map(|(&wb, &x)| wb as f64 * x / c).sum();
-                        q += (m - mw) * (m - mw);
-                    }
-                    wse[ix * nsets + k] = (q / denom).sqrt() as f32;
-                }
+            alive &= !ended;
+        }
+    }
+
+    /// Accumulate a traced pixel's samples in order and finish it.
+    #[inline(always)]
+    fn finish_slot(&self, slot: &PixelSlot, order: &[(u32, u32)], out: &mut PixelOut<'_>) {
+        let nb = self.world.bands;
+        out.acc.fill(0.0);
+        for (k, &(bi, _)) in order.iter().enumerate() {
+            if let Some(w) = slot.weights[k] {
+                let a = &mut out.acc[bi as usize * nb..(bi as usize + 1) * nb];
+                out.nan += accumulate(a, &slot.radiance[k * nb..(k + 1) * nb], w);
             }
         }
-        (nan, wse)
+        self.finish_pixel(slot.ix, out);
     }
+
+    /// Mean and standard error of pixel `ix` from its batch totals
+    /// `out.acc`. Totals add the batches in order 0, 1, … for every band.
+    #[inline(always)]
+    fn finish_pixel(&self, ix: usize, out: &mut PixelOut<'_>) {
+        let nb = self.world.bands;
+        let batches = self.batches;
+        let nsets = self.wsets.len();
+        let PixelOut {
+            irr,
+            se,
+            wse,
+            mean_px,
+            ss_px,
+            acc,
+            counts,
+            ..
+        } = out;
+        let n = self.s.spp as f64;
+        let irr_px = &mut irr[ix * nb..(ix + 1) * nb];
+        mean_px.fill(0.0);
+        for a in acc.chunks_exact(nb) {
+            for (t, &x) in mean_px.iter_mut().zip(a) {
+                *t += x;
+            }
+        }
+        for (m, o) in mean_px.iter_mut().zip(irr_px.iter_mut()) {
+            *m /= n;
+            *o = *m as f32;
+        }
+        if batches > 1 {
+            ss_px.fill(0.0);
+            for (a, &c) in acc.chunks_exact(nb).zip(counts.iter()) {
+                let c = c.max(1) as f64;
+                for ((q, &x), &mean) in ss_px.iter_mut().zip(a).zip(mean_px.iter()) {
+                    let m = x / c;
+                    *q += (m - mean) * (m - mean);
+                }
+            }
+            let denom = batches as f64 * (batches as f64 - 1.0);
+            for (o, &q) in se[ix * nb..(ix + 1) * nb].iter_mut().zip(ss_px.iter()) {
+                *o = (q / denom).sqrt() as f32;
+            }
+            for (k, w) in self.wsets.iter().enumerate() {
+                let mw: f64 = w
+                    .iter()
+                    .zip(mean_px.iter())
+                    .map(|(&a, &m)| a as f64 * m)
+                    .sum();
+                let mut q = 0.0f64;
+                for (a, &c) in acc.chunks_exact(nb).zip(counts.iter()) {
+                    let c = c.max(1) as f64;
+                    let m: f64 = w.iter().zip(a).map(|(&wb, &x)| wb as f64 * x / c).sum();
+                    q += (m - mw) * (m - mw);
+                }
+                wse[ix * nsets + k] = (q / denom).sqrt() as f32;
+            }
+        }
+    }
+}
+
+/// Samples in batch `bi` of a pixel's `spp` split into `batches`: batch
+/// `bi` holds samples bi, bi + batches, …
+#[inline(always)]
+fn batch_len(spp: u32, batches: usize, bi: usize) -> usize {
+    (spp as usize - bi).div_ceil(batches)
+}
+
+/// A row's outputs and the per-pixel buffers that fill them.
+struct PixelOut<'a> {
+    irr: &'a mut [f32],
+    se: &'a mut [f32],
+    /// Weighted standard errors, `wsets` per pixel.
+    wse: Vec<f32>,
+    mean_px: Vec<f64>,
+    ss_px: Vec<f64>,
+    /// The pixel's batch totals, batch-major.
+    acc: Vec<f64>,
+    /// Samples per batch (vignetted ones included).
+    counts: Vec<u32>,
+    /// Non-finite samples dropped.
+    nan: u64,
+}
+
+/// A pixel in flight in `row_packets`.
+#[derive(Default)]
+struct PixelSlot {
+    /// Index in the row.
+    ix: usize,
+    pixel_key: u64,
+    scrambles: Vec<BatchScramble>,
+    /// The next of its samples to issue (index into the order).
+    next: usize,
+    /// Its samples being traced now.
+    tracing: u32,
+    /// Each sample's camera weight (`None`: vignetted, or not yet issued).
+    weights: Vec<Option<f64>>,
+    /// Each traced sample's radiance, `bands` per sample.
+    radiance: Vec<f32>,
 }
 
 #[cfg(test)]
