@@ -272,6 +272,91 @@ pub struct RtfWave {
 /// when read; degrees above 63 are rejected there).
 const MAX_POWERS: usize = 64;
 
+/// What `Rtf::transfer` needs of one wavelength's tables, worked out once
+/// (`RtfCamera` keeps one per wavelength): the powers to tabulate and, when
+/// every output present uses the same exponents in the same order (as the
+/// fitted tables do), the six polynomials as one (`FusedPolys`).
+#[derive(Clone, Debug)]
+pub struct WavePlan {
+    /// Highest exponent + 1 over the outputs (at most `MAX_POWERS`).
+    powers: usize,
+    fused: Option<FusedPolys>,
+}
+
+impl WavePlan {
+    pub fn new(w: &RtfWave) -> Self {
+        WavePlan {
+            fused: FusedPolys::new(w),
+            ..Self::powers_only(w)
+        }
+    }
+    /// The powers alone (no allocation): each output evaluated on its own.
+    fn powers_only(w: &RtfWave) -> Self {
+        let powers = (w
+            .outputs
+            .iter()
+            .flatten()
+            .map(|p| p.max_degree())
+            .max()
+            .unwrap_or(0) as usize
+            + 1)
+        .min(MAX_POWERS);
+        WavePlan {
+            powers,
+            fused: None,
+        }
+    }
+}
+
+/// The outputs of one wavelength sharing one list of exponents, evaluated
+/// together: per term, the monomial's three powers are looked up once and
+/// each output's sum gets c·rᵃ·dxᵇ·dyᶜ in the same order and association as
+/// `Poly::eval_pow` (((c·rᵃ)·dxᵇ)·dyᶜ, summed from −0.0 in term order, as
+/// `Iterator::sum` does), so each value is `eval_pow`'s bit for bit; the six
+/// sums are independent chains (and vector lanes) instead of six loops one
+/// after another.
+#[derive(Clone, Debug)]
+struct FusedPolys {
+    terms: Vec<[u32; 3]>,
+    /// Per term, the coefficient of each output (0 for an absent output,
+    /// whose value is not used).
+    coeff: Vec<[f64; 8]>,
+}
+
+impl FusedPolys {
+    fn new(w: &RtfWave) -> Option<Self> {
+        let mut present = w.outputs.iter().flatten();
+        let terms = present.next()?.terms.clone();
+        if !present.all(|p| p.terms == terms && p.coeff.len() == terms.len()) {
+            return None;
+        }
+        let coeff = (0..terms.len())
+            .map(|i| {
+                let mut c = [0.0; 8];
+                for (k, p) in w.outputs.iter().enumerate() {
+                    if let Some(p) = p {
+                        c[k] = p.coeff[i];
+                    }
+                }
+                c
+            })
+            .collect();
+        Some(FusedPolys { terms, coeff })
+    }
+
+    #[inline]
+    fn eval(&self, pr: &[f64], px: &[f64], py: &[f64]) -> [f64; 8] {
+        let mut acc = [-0.0f64; 8];
+        for (t, c) in self.terms.iter().zip(&self.coeff) {
+            let (a, b, d) = (pr[t[0] as usize], px[t[1] as usize], py[t[2] as usize]);
+            for k in 0..8 {
+                acc[k] += c[k] * a * b * d;
+            }
+        }
+        acc
+    }
+}
+
 const OUT_NAMES: [&str; 6] = ["outx", "outy", "outz", "outdx", "outdy", "outdz"];
 
 /// A ray-transfer function.
@@ -524,13 +609,13 @@ impl Rtf {
         })
     }
 
-    fn wave(&self, lambda_nm: f64) -> &RtfWave {
-        self.waves
-            .iter()
-            .min_by(|a, b| {
-                (a.wavelength_nm - lambda_nm)
+    /// Index of the table nearest to `lambda_nm` (the first of equally near ones).
+    fn wave_index(&self, lambda_nm: f64) -> usize {
+        (0..self.waves.len())
+            .min_by(|&a, &b| {
+                (self.waves[a].wavelength_nm - lambda_nm)
                     .abs()
-                    .total_cmp(&(b.wavelength_nm - lambda_nm).abs())
+                    .total_cmp(&(self.waves[b].wavelength_nm - lambda_nm).abs())
             })
             .unwrap()
     }
@@ -548,6 +633,19 @@ impl Rtf {
     /// point, i.e. with z measured from the input plane, direction), or None
     /// when blocked by the pass/no-pass test.
     pub fn transfer(&self, w: &RtfWave, x: f64, y: f64, d: DVec3) -> Option<(DVec3, DVec3)> {
+        self.transfer_planned(w, &WavePlan::powers_only(w), x, y, d)
+    }
+
+    /// `transfer` with what it needs of `w` worked out once (`plan`, made
+    /// from `w` by `WavePlan::new`): the same result, bit for bit.
+    pub fn transfer_planned(
+        &self,
+        w: &RtfWave,
+        plan: &WavePlan,
+        x: f64,
+        y: f64,
+        d: DVec3,
+    ) -> Option<(DVec3, DVec3)> {
         let r = (x * x + y * y).sqrt();
         let (s, c) = if r > 0.0 { (x / r, y / r) } else { (0.0, 1.0) };
         // Rotate by ψ (sinψ = s, cosψ = c): the input point goes to (0, r).
@@ -560,15 +658,7 @@ impl Rtf {
         if !w.pass.passes(r, dx / d.z * l, r + dy / d.z * l) {
             return None;
         }
-        let deg = (w
-            .outputs
-            .iter()
-            .flatten()
-            .map(|p| p.max_degree())
-            .max()
-            .unwrap_or(0) as usize
-            + 1)
-        .min(MAX_POWERS);
+        let deg = plan.powers;
         let mut pr = [1.0; MAX_POWERS];
         let mut px_ = [1.0; MAX_POWERS];
         let mut py_ = [1.0; MAX_POWERS];
@@ -577,7 +667,11 @@ impl Rtf {
             px_[i] = px_[i - 1] * dx;
             py_[i] = py_[i - 1] * dy;
         }
-        let ev = |k: usize| w.outputs[k].as_ref().map(|p| p.eval_pow(&pr, &px_, &py_));
+        let fused = plan.fused.as_ref().map(|f| f.eval(&pr, &px_, &py_));
+        let ev = |k: usize| match &fused {
+            Some(v) => w.outputs[k].as_ref().map(|_| v[k]),
+            None => w.outputs[k].as_ref().map(|p| p.eval_pow(&pr, &px_, &py_)),
+        };
         let (ox, oy) = (ev(0)?, ev(1)?);
         let oz = ev(2).unwrap_or(
             self.plane_offset_input_mm + self.thickness_mm + self.plane_offset_output_mm,
@@ -610,6 +704,8 @@ pub struct RtfCamera {
     pub film_distance_mm: f64,
     /// Per wavelength: largest |coordinate| of any pass region (sampling bound).
     reach_mm: Vec<f64>,
+    /// Per wavelength: what `Rtf::transfer` needs, worked out once.
+    plans: Vec<WavePlan>,
 }
 
 impl RtfCamera {
@@ -625,10 +721,12 @@ impl RtfCamera {
             .iter()
             .map(|w| Self::reach_of(w, film_distance_mm, rtf.thickness_mm))
             .collect();
+        let plans = rtf.waves.iter().map(WavePlan::new).collect();
         Ok(Self {
             rtf,
             film_distance_mm,
             reach_mm,
+            plans,
         })
     }
     /// Farthest any pass region of `w` reaches, over input radii up to its
@@ -694,7 +792,8 @@ impl RtfCamera {
 
 impl Camera for RtfCamera {
     fn sample_ray(&self, film_m: DVec2, u: DVec2, lambda_nm: f64) -> Option<CameraRay> {
-        let w = self.rtf.wave(lambda_nm);
+        let wi = self.rtf.wave_index(lambda_nm);
+        let w = &self.rtf.waves[wi];
         let p = -film_m * 1e3;
         let r = p.length();
         let b = self.sampling_box(w, r)?;
@@ -718,7 +817,9 @@ impl Camera for RtfCamera {
         let d = v / dist2.sqrt();
         let t = z_in / d.z;
         let pin = o + d * t;
-        let (po, pd) = self.rtf.transfer(w, pin.x, pin.y, d)?;
+        let (po, pd) = self
+            .rtf
+            .transfer_planned(w, &self.plans[wi], pin.x, pin.y, d)?;
         let origin = DVec3::new(po.x, po.y, z_in + po.z) * 1e-3;
         (weight.is_finite() && origin.is_finite()).then_some(CameraRay {
             origin,

@@ -314,7 +314,7 @@ fn the_nearest_wavelengths_table_is_used() {
         (600.1, 650.0),
         (100.0, 450.0),
     ] {
-        assert_eq!(rtf.wave(ask).wavelength_nm, got);
+        assert_eq!(rtf.waves[rtf.wave_index(ask)].wavelength_nm, got);
     }
 }
 
@@ -630,4 +630,47 @@ fn unlimited_pass_regions_reach_to_ten_lens_lengths() {
     for (got, want) in b.iter().zip([-x1 - mx, x1 + mx, y0 - my, y1 + my]) {
         assert!(close(*got, want, 1e-12), "{b:?}");
     }
+}
+
+/// The camera's planned transfer (the six outputs evaluated together,
+/// `FusedPolys`) gives `transfer`'s bits (each output on its own) on the
+/// shipped Pixel 4a tables, for rays over the whole input plane and
+/// aperture, passing and blocked; and a wave whose outputs use different
+/// exponents is not fused.
+#[test]
+fn planned_transfer_is_bit_identical() {
+    let rtf = Rtf::load(Path::new(
+        "lenses/rtf/pixel4a-rearcamera-ellipse-raytransfer.json",
+    ))
+    .unwrap();
+    let w = &rtf.waves[0];
+    let plan = WavePlan::new(w);
+    assert!(
+        plan.fused.is_some(),
+        "the fitted tables share their exponents"
+    );
+    let mut rng = crate::render::sampling::Rng::for_sample(7, 0, 0);
+    let (mut passed, mut n) = (0, 0);
+    for _ in 0..20_000 {
+        let x = (rng.uniform() as f64 - 0.5) * 6.0;
+        let y = (rng.uniform() as f64 - 0.5) * 6.0;
+        let d = DVec3::new(
+            (rng.uniform() as f64 - 0.5) * 0.8,
+            (rng.uniform() as f64 - 0.5) * 0.8,
+            1.0,
+        )
+        .normalize();
+        let a = rtf.transfer(w, x, y, d);
+        let b = rtf.transfer_planned(w, &plan, x, y, d);
+        let bits = |r: Option<(DVec3, DVec3)>| {
+            r.map(|(p, q)| [p.x, p.y, p.z, q.x, q.y, q.z].map(f64::to_bits))
+        };
+        assert_eq!(bits(a), bits(b), "ray ({x}, {y}) {d}");
+        passed += a.is_some() as u32;
+        n += 1;
+    }
+    assert!(passed > 100 && passed < n, "{passed} of {n} passed");
+    let mut mixed = w.clone();
+    mixed.outputs[0] = Some(poly(&[([0, 0, 0], 1.0), ([1, 0, 0], 2.0)]));
+    assert!(WavePlan::new(&mixed).fused.is_none());
 }
