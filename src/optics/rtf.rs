@@ -135,7 +135,7 @@ impl Ellipses {
         if !(r >= 0.0) || r > last {
             return None;
         }
-        let k = p.partition_point(|&x| x <= r).clamp(1, p.len().max(2) - 1);
+        let k = first_above(p, r).clamp(1, p.len().max(2) - 1);
         if p.len() == 1 {
             return Some([
                 self.centers_x_mm[0],
@@ -153,6 +153,34 @@ impl Ellipses {
             l(&self.radii_y_mm),
         ])
     }
+}
+
+/// `p.partition_point(|&x| x <= r)` for sorted `p` and a number `r` (not
+/// NaN): the first index whose entry is above `r`. Starts from where `r`
+/// would fall if the entries were evenly spaced (the fitted tables' input
+/// radii are) and steps to the exact index with the same comparisons, so
+/// uneven spacing is only slower.
+#[inline]
+fn first_above(p: &[f64], r: f64) -> usize {
+    let n = p.len();
+    if n < 2 {
+        return p.partition_point(|&x| x <= r);
+    }
+    let span = p[n - 1] - p[0];
+    let guess = if span > 0.0 {
+        ((r - p[0]) / span * (n - 1) as f64).floor()
+    } else {
+        0.0
+    };
+    // `as usize` saturates: below 0 (and NaN) to 0, above n to usize::MAX.
+    let mut k = (guess as usize).saturating_add(1).min(n);
+    while k > 0 && p[k - 1] > r {
+        k -= 1;
+    }
+    while k < n && p[k] <= r {
+        k += 1;
+    }
+    k
 }
 
 /// Pass/no-pass as an intersection of circles on a plane `plane_distance_mm`

@@ -674,3 +674,29 @@ fn planned_transfer_is_bit_identical() {
     mixed.outputs[0] = Some(poly(&[([0, 0, 0], 1.0), ([1, 0, 0], 2.0)]));
     assert!(WavePlan::new(&mixed).fused.is_none());
 }
+
+/// `first_above` is `partition_point(x <= r)` on even, uneven, repeated and
+/// one-entry tables, for radii before, on, between and after the entries.
+#[test]
+fn first_above_is_the_partition_point() {
+    let tables: [&[f64]; 5] = [
+        &[0.0, 0.1, 0.2, 0.30000000000000004, 0.4],
+        &[0.0, 1.0, 3.0, 3.0, 3.5, 10.0],
+        &[2.0],
+        &[1.0, 1.0, 1.0],
+        &[0.0, 0.001, 0.5, 0.9, 0.95, 1.0],
+    ];
+    for p in tables {
+        let mut rs: Vec<f64> = p.to_vec();
+        rs.extend(p.iter().map(|x| x.next_up()));
+        rs.extend(p.iter().map(|x| x.next_down()));
+        rs.extend([-1.0, 0.05, 0.5, 2.5, 3.2, 7.0, 11.0, 1e300, f64::INFINITY]);
+        for r in rs {
+            assert_eq!(
+                first_above(p, r),
+                p.partition_point(|&x| x <= r),
+                "{p:?} at {r}"
+            );
+        }
+    }
+}
