@@ -212,14 +212,15 @@ fn accumulate(acc: &mut [f64], l: &[f32], weight: f64) -> u64 {
     0
 }
 
-/// Whether a pixel's samples are traced 16 paths at a time
-/// (`integrator::step_packet`, packet traversal, lanes refilled as paths end)
+/// Whether a row's samples are traced 16 paths at a time
+/// (`integrator::step_packet`, packet traversal, Lambertian hits shaded in
+/// structure of arrays, lanes refilled from the row's stream as paths end)
 /// at instruction set `isa`, or one by one. Same image bits either way.
 /// `CAMSIM_RENDER_PACKETS=1` / `=0` forces the choice (anything else is
 /// ignored with a warning); by default packets at AVX2 and AVX-512, where
-/// they measured faster on the bench's Cornell box (AVX-512 ≈ 7 %, AVX2
-/// ≈ 3 % wall), one by one at SSE, where the packet traversal is slower
-/// (README, *Performance by machine*).
+/// they measured faster on the bench's Cornell box (AVX-512 ≈ 35 %, AVX2
+/// ≈ 21 % more paths/s), one by one at SSE, where the packet traversal is
+/// slower (≈ 20 % fewer paths/s; README, *Performance by machine*).
 pub fn packets_enabled(isa: RenderIsa) -> bool {
     static P: std::sync::OnceLock<Option<bool>> = std::sync::OnceLock::new();
     let forced = *P.get_or_init(|| match std::env::var("CAMSIM_RENDER_PACKETS") {

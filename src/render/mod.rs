@@ -40,27 +40,31 @@
 //!   (`simd::RenderIsa`: sse, avx2+fma, avx512f; `CAMSIM_RENDER_ISA` lowers
 //!   it), with the same bits at every level.
 //! - Paths one at a time or in packets (`film::Kernel`): at AVX2 and AVX-512
-//!   a pixel's samples are traced 16 at a time (`integrator::step_packet`,
+//!   a row's samples are traced 16 at a time (`integrator::step_packet`,
 //!   one bounce of every live path): the live paths' rays are cast as one
 //!   `RayPacket` through the packet traversal (`bvh4_packet.rs`, SIMD across
-//!   rays; AVX-512 intrinsics in `bvh4_packet_avx512.rs` at that level), each
-//!   path is shaded, then their shadow rays are cast as one packet, and a lane
-//!   whose path ends takes the pixel's next sample. At SSE, or with
-//!   `CAMSIM_RENDER_PACKETS=0`, each path is traced alone
-//!   (`integrator::trace`; `=1` forces packets). Both render the same bits;
-//!   one bounce is one function (`integrator::scatter`) for both. Measured
-//!   gains and why the packets are not yet much faster (shading is still per
-//!   path): README, *Performance by machine*.
+//!   rays; AVX-512 intrinsics in `bvh4_packet_avx512.rs` at that level), the
+//!   hits on Lambertian triangles are shaded together in structure of arrays
+//!   (`shade_packet.rs`: hit points, frames, triangle-light samples, MIS,
+//!   cosine BSDF samples across the 16 lanes) and any other hit lane by lane
+//!   (`integrator::scatter`), then their shadow rays are cast as one packet;
+//!   a lane whose path ends takes the next sample of the row's stream, of
+//!   the same pixel or the next (`film::RowJob::row_packets`), and each
+//!   pixel is accumulated in sample order when its last path ends. At SSE,
+//!   or with `CAMSIM_RENDER_PACKETS=0`, each path is traced alone
+//!   (`integrator::trace`; `=1` forces packets). Both render the same bits.
+//!   Measured gains: README, *Performance by machine*.
 //! - Light selection: proportional to power, each emitting light at least
 //!   10⁻³/N (`world::selection_pmf`).
 //! - Performance: `bench/mitsuba_compare.sh` (Mitsuba `cornell_box()`, 256²,
 //!   max_depth 7 = max_bounces 6, 2 threads, CIE Y against one converged
 //!   Mitsuba reference, box filter, 4 seeds). The figures per machine and
 //!   their history are in the README (*Performance by machine*); on the
-//!   2-core AVX-512 EPYC (2026-11-28, 16 paths at a time) camsim runs 0.87×
-//!   Mitsuba's paths/s (31 bands per path against 4 wavelengths), and with
-//!   the Sobol sampler in one batch its equal-time RMSE is 0.52 of Mitsuba's
-//!   over all pixels and 0.93 for light transport (emitter edge excluded).
+//!   2-core AVX-512 EPYC (2026-11-28, 16 paths at a time, shading in
+//!   structure of arrays) camsim runs 1.10× Mitsuba's paths/s (31 bands per
+//!   path against 4 wavelengths), and with the Sobol sampler in one batch
+//!   its equal-time RMSE is 0.44 of Mitsuba's over all pixels and 0.82 for
+//!   light transport (emitter edge excluded).
 //!   Converged images agree (mean Y ratio 0.9999, 16×16 blocks 0.40 % RMS).
 //!   Mitsuba's LLVM `render()` returns before its kernels run: time it to
 //!   completion. Russian roulette from the 2nd bounce (pbrt-v4) is as
