@@ -1,7 +1,8 @@
 //! The film: pixel sampling, camera weights, batch statistics, labels and
 //! depth, parallel over image rows with per-pixel seeding.
 
-use super::integrator::{PacketScratch, PathState, Scratch, first_hit, step_packet, trace};
+use super::integrator::{PacketScratch, Scratch, first_hit, step_packet, trace};
+use super::path::PathState;
 use super::ray_packet::{ALL_LANES, LANES, LaneMask, lanes};
 use super::sampler::{BatchScramble, Sampler, SamplerKind};
 use super::sampling::Rng;

@@ -12,8 +12,7 @@
 
 use super::accel::Hit;
 use super::geometry::offset_ray_origin;
-pub use super::path::{PathState, ShadowRay};
-use super::path::{SHADOW_EPS, add_emitted, add_scaled, roulette};
+use super::path::{PathState, SHADOW_EPS, ShadowRay, add_emitted, add_scaled, roulette};
 use super::ray_packet::{LANES, LaneMask, PacketHits, RayPacket, lanes};
 use super::sampler::Sampler;
 use super::sampling::{Frame, power_heuristic};
@@ -347,13 +346,16 @@ impl PacketScratch {
 }
 
 /// One bounce of the paths in the lanes of `alive` (issue 17 item 1): their
-/// rays are cast as one packet, each lane is shaded (`scatter`), then their
-/// shadow rays are cast as one packet. Lane `l` continues from `st[l]` with
-/// its throughput and radiance in `sc`; returns the lanes whose paths ended
-/// at this bounce (their radiance in `sc.l` is final). Each lane takes the
-/// same draws and does the same operations in the same order as `trace`
-/// does for that path, so a path traced bounce by bounce here, in any lane
-/// and beside any other paths, gives `trace`'s bits.
+/// rays are cast as one packet; the lanes whose hits `World::packet_shadable`
+/// accepts (Lambertian triangles, triangle area lights) are shaded together
+/// in structure of arrays (`shade_packet::shade_diffuse`), every other lane
+/// on its own (`scatter`); then their shadow rays are cast as one packet.
+/// Lane `l` continues from `st[l]` with its throughput and radiance in `sc`;
+/// returns the lanes whose paths ended at this bounce (their radiance in
+/// `sc.l` is final). Each lane takes the same draws and does the same
+/// operations in the same order as `trace` does for that path, so a path
+/// traced bounce by bounce here, in any lane and beside any other paths,
+/// gives `trace`'s bits.
 #[inline(always)]
 pub fn step_packet(
     world: &World,
