@@ -256,7 +256,8 @@ pub(super) fn shade_diffuse(
     let mut shadow_d = Lanes3::splat(Vec3::Z);
     let mut tmax = [0f32; LANES];
     let mut scale = [0f32; LANES];
-    let mut unblocked_adds = [false; LANES];
+    // Per lane: a shadow ray whose contribution is added if it is unblocked.
+    let mut nee_ok = [false; LANES];
     if nee != 0 {
         for l in 0..LANES {
             let (b0, b1, b2) = uniform_triangle(u1[l], u2[l]);
@@ -293,7 +294,7 @@ pub(super) fn shade_diffuse(
             let len = dv.length();
             let pdf_b = wil.z / PI;
             let w = power_heuristic(pdf, pdf_b);
-            unblocked_adds[l] = light_ok && facing && len > 0.0;
+            nee_ok[l] = light_ok && facing && len > 0.0;
             shadow_d.set(l, dv / len);
             tmax[l] = len * (1.0 - SHADOW_EPS);
             scale[l] = wil.z * w / pdf;
@@ -308,7 +309,7 @@ pub(super) fn shade_diffuse(
         else {
             unreachable!("shade_diffuse is given Lambertian hits only (World::packet_shadable)")
         };
-        if nee & (1 << i) != 0 && unblocked_adds[i] {
+        if nee & (1 << i) != 0 && nee_ok[i] {
             let LightKind::Area { le, .. } = &world.lights[light[i]] else {
                 unreachable!("shade_diffuse samples area lights only")
             };
