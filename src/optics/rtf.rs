@@ -129,6 +129,7 @@ pub struct Ellipses {
 
 impl Ellipses {
     /// (cx, cy, rx, ry) at input radius r; None beyond the last position.
+    #[inline]
     pub fn at(&self, r: f64) -> Option<[f64; 4]> {
         let p = &self.positions_mm;
         let last = *p.last()?;
@@ -168,11 +169,12 @@ fn first_above(p: &[f64], r: f64) -> usize {
     }
     let span = p[n - 1] - p[0];
     let guess = if span > 0.0 {
-        ((r - p[0]) / span * (n - 1) as f64).floor()
+        (r - p[0]) / span * (n - 1) as f64
     } else {
         0.0
     };
-    // `as usize` saturates: below 0 (and NaN) to 0, above n to usize::MAX.
+    // `as usize` truncates, which is the floor for the non-negative guesses,
+    // and saturates: below 0 (and NaN) to 0, above n to usize::MAX.
     let mut k = (guess as usize).saturating_add(1).min(n);
     while k > 0 && p[k - 1] > r {
         k -= 1;
@@ -237,6 +239,7 @@ impl PassNoPass {
         }
     }
     /// Bounding box [x0, x1, y0, y1] of the pass region at input radius r.
+    #[inline]
     pub fn bbox(&self, r: f64) -> Option<[f64; 4]> {
         match self {
             PassNoPass::Ellipses(e) => e
