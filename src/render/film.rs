@@ -248,7 +248,7 @@ struct RowJob<'a> {
     dispersive_cam: bool,
     mid_nm: f64,
     wsets: &'a [&'a [f32]],
-    /// Trace a pixel's paths 16 at a time (`step_packet`).
+    /// Trace a row's paths 16 at a time (`row_packets`, `step_packet`).
     packets: bool,
 }
 
@@ -526,10 +526,7 @@ impl RowJob<'_> {
                 }
                 if slot.next == order.len() {
                     issuing = None;
-                    if slot.tracing == 0 {
-                        self.finish_slot(slot, order, out);
-                        free.push(k);
-                    }
+                    self.finish_if_traced(slot, k, order, out, &mut free);
                 }
             }
             if alive == 0 {
@@ -541,12 +538,26 @@ impl RowJob<'_> {
                 let slot = &mut slots[k];
                 slot.radiance[n * nb..(n + 1) * nb].copy_from_slice(&psc.radiance(lane)[..nb]);
                 slot.tracing -= 1;
-                if slot.tracing == 0 && slot.next == order.len() {
-                    self.finish_slot(slot, order, out);
-                    free.push(k);
-                }
+                self.finish_if_traced(slot, k, order, out, &mut free);
             }
             alive &= !ended;
+        }
+    }
+
+    /// Once every sample of the pixel in slot `k` is issued and traced,
+    /// finish the pixel and put the slot on the `free` list.
+    #[inline(always)]
+    fn finish_if_traced(
+        &self,
+        slot: &PixelSlot,
+        k: usize,
+        order: &[(u32, u32)],
+        out: &mut PixelOut<'_>,
+        free: &mut Vec<usize>,
+    ) {
+        if slot.tracing == 0 && slot.next == order.len() {
+            self.finish_slot(slot, order, out);
+            free.push(k);
         }
     }
 
@@ -678,7 +689,8 @@ mod tests {
     /// same operations as alone (`integrator::step_packet`). The Cornell box
     /// exercises diffuse and area-light paths, roulette and MIS; 40 spp in 3
     /// batches (14, 13, 13 samples) fill the 16 lanes, refill each lane as its
-    /// path ends, and leave lanes empty at the pixel's end.
+    /// path ends (from the next pixel too), and leave lanes empty at the
+    /// row's end.
     #[test]
     fn every_isa_level_renders_the_same_bits() {
         let (scene, film) = mitsuba_cornell_box();

@@ -118,6 +118,7 @@ pub(super) fn shade_diffuse(
     let mut u_light = [0f32; LANES];
     let mut ended: LaneMask = 0;
     let mut go: LaneMask = 0;
+    let mut emitters: LaneMask = 0;
     for i in lanes(todo) {
         let prim = hits.prim[i];
         let Shape::Triangle { p } = world.accel.shapes[prim as usize] else {
@@ -129,25 +130,10 @@ pub(super) fn shade_diffuse(
         }
         ng.set(i, world.triangle_normal(prim));
         dir.set(i, st[i].d);
-        let s = &mut st[i];
-        let info = world.info[prim as usize];
-        if info.light != u32::MAX {
-            let d = s.d;
-            let dlen = d.length();
-            let wo_w = -d / dlen;
-            let span = i * stride..(i + 1) * stride;
-            let ng_i = world.triangle_normal(prim);
-            add_emitted(
-                world,
-                s,
-                info.light,
-                ng_i.dot(wo_w),
-                hits.h[i].t * dlen,
-                &beta[span.clone()],
-                &mut rad[span],
-            );
+        if world.info[prim as usize].light != u32::MAX {
+            emitters |= 1 << i;
         }
-        if s.depth >= max_bounces {
+        if st[i].depth >= max_bounces {
             ended |= 1 << i;
             continue;
         }
@@ -159,11 +145,9 @@ pub(super) fn shade_diffuse(
         (v1[i], v2[i]) = sm.get2d();
         u_rr[i] = sm.get1d();
     }
-    if go == 0 {
-        return ended;
-    }
 
-    // The hit, its frame, the BSDF sample and the continuation ray, all lanes.
+    // The hit, its frame, the BSDF sample and the continuation ray, all lanes;
+    // with the ray's length and the cosine at the hit for emission.
     let mut pt = Lanes3::splat(Vec3::ZERO);
     let mut ng_s = Lanes3::splat(Vec3::Z);
     let mut fs = Lanes3::splat(Vec3::X);
@@ -174,6 +158,7 @@ pub(super) fn shade_diffuse(
     let mut wo_z = [0f32; LANES];
     let mut bsdf_pdf = [0f32; LANES];
     let mut cont = [false; LANES];
+    let (mut ray_len, mut cos_hit) = ([0f32; LANES], [0f32; LANES]);
     for l in 0..LANES {
         let (p, p_err) = triangle_point(
             &[v[0].get(l), v[1].get(l), v[2].get(l)],
@@ -184,8 +169,9 @@ pub(super) fn shade_diffuse(
         let dlen = d.length();
         let wo_w = -d / dlen;
         let n = ng.get(l);
+        let cos = n.dot(wo_w);
         // Opaque: face the normal towards wo.
-        let n_s = if n.dot(wo_w) < 0.0 { -n } else { n };
+        let n_s = if cos < 0.0 { -n } else { n };
         let frame = Frame::from_normal(n_s);
         let wo = frame.to_local(wo_w);
         let front = offset_ray_origin(p, p_err, n_s, n_s);
@@ -211,6 +197,24 @@ pub(super) fn shade_diffuse(
         next_d.set(l, wi_w);
         wo_z[l] = wo.z;
         bsdf_pdf[l] = pdf;
+        (ray_len[l], cos_hit[l]) = (dlen, cos);
+    }
+
+    // Emission (lanes that hit an emitter), before the throughput changes.
+    for i in lanes(emitters) {
+        let span = i * stride..(i + 1) * stride;
+        add_emitted(
+            world,
+            &st[i],
+            world.info[hits.prim[i] as usize].light,
+            cos_hit[i],
+            hits.h[i].t * ray_len[i],
+            &beta[span.clone()],
+            &mut rad[span],
+        );
+    }
+    if go == 0 {
+        return ended;
     }
 
     // The light each lane samples (next-event estimation needs wo.z > 0).
