@@ -356,9 +356,15 @@ struct FusedPolys {
 
 impl FusedPolys {
     fn new(w: &RtfWave) -> Option<Self> {
-        let mut present = w.outputs.iter().flatten();
-        let terms = present.next()?.terms.clone();
-        if !present.all(|p| p.terms == terms && p.coeff.len() == terms.len()) {
+        let terms = w.outputs.iter().flatten().next()?.terms.clone();
+        // Every output (the first too) with these exponents and one
+        // coefficient each, so `coeff[i]` below exists for every term.
+        if !w
+            .outputs
+            .iter()
+            .flatten()
+            .all(|p| p.terms == terms && p.coeff.len() == terms.len())
+        {
             return None;
         }
         let coeff = (0..terms.len())

@@ -673,6 +673,13 @@ fn planned_transfer_is_bit_identical() {
     let mut mixed = w.clone();
     mixed.outputs[0] = Some(poly(&[([0, 0, 0], 1.0), ([1, 0, 0], 2.0)]));
     assert!(WavePlan::new(&mixed).fused.is_none());
+    // The first output with a coefficient missing is not fused either (a
+    // fused table would index past its coefficients).
+    let mut short = w.clone();
+    if let Some(p) = short.outputs[0].as_mut() {
+        p.coeff.pop();
+    }
+    assert!(WavePlan::new(&short).fused.is_none());
 }
 
 /// `first_above` is `partition_point(x <= r)` on even, uneven, repeated and
