@@ -143,11 +143,10 @@ pub fn scatter(
     // shadow ray and a reflected continuation ray.
     let origin_front = offset_ray_origin(p, p_err, ng_s, ng_s);
 
-    // Every bounce takes the same draws in the same order (light choice,
-    // light position, lobe, direction, roulette) whether or not it uses
-    // them, so draw k of every sample of a batch samples the same
+    // Every bounce takes the same draws in the same order (light choice and
+    // position from one 2-D point, lobe, direction, roulette) whether or not
+    // it uses them, so draw k of every sample of a batch samples the same
     // dimension of the path (sampler.rs).
-    let u_light = smp.get1d();
     let (u1, u2) = smp.get2d();
     let u_lobe = smp.get1d();
     let (v1, v2) = smp.get2d();
@@ -157,7 +156,7 @@ pub fn scatter(
     let mut shadow = None;
     if !bsdf.is_delta()
         && wo.z > 0.0
-        && let Some(ls) = world.sample_light(p, u_light, u1, u2)
+        && let Some(ls) = world.sample_light(p, u1, u2)
     {
         let wi = frame.to_local(ls.wi);
         if wi.z > 0.0 && ls.wi.dot(ng_s) > 0.0 {
@@ -457,6 +456,54 @@ mod tests {
         for (g, w) in p.iter().zip(want) {
             assert!((*g as f64 - w).abs() < 1e-7 * w, "{p:?}");
         }
+    }
+
+    /// One draw picks the light and, remapped, places the sample on it: the
+    /// light is the cumulative table's partition point, and the draws that
+    /// pick one light, remapped, spread evenly over [0, 1) (so a stratified
+    /// point stays stratified on each light; pbrt-v4 and Mitsuba reuse the
+    /// draw the same way).
+    #[test]
+    fn light_choice_reuses_its_draw_uniformly() {
+        let mut scene = Scene::default();
+        for (k, i) in [1.0, 2.0, 5.0].into_iter().enumerate() {
+            scene.lights.push(Light::Point {
+                position: DVec3::new(k as f64, 0.0, 1.0),
+                intensity: Spectrum::constant("i", i),
+            });
+        }
+        let grid = WavelengthGrid::new(500.0, 600.0, 50.0).unwrap();
+        let world = World::build(&scene, &grid, BvhKind::Bvh4).unwrap();
+        let n = 8000;
+        let mut per_light = vec![Vec::new(); 3];
+        for k in 0..n {
+            let u = (k as f32 + 0.5) / n as f32;
+            let (idx, sel, rest) = world.choose_light(u);
+            assert_eq!(idx, world.light_cdf.partition_point(|&c| c <= u), "u = {u}");
+            assert_eq!(sel, world.light_pmf[idx]);
+            assert!((0.0..1.0).contains(&rest), "u = {u}: remapped {rest}");
+            per_light[idx].push(rest);
+        }
+        for (idx, want_p) in [1.0 / 8.0, 2.0 / 8.0, 5.0 / 8.0].into_iter().enumerate() {
+            let r = &per_light[idx];
+            let m = r.len();
+            assert!(
+                (m as f64 / n as f64 - want_p).abs() < 1e-3,
+                "light {idx}: {m} of {n}"
+            );
+            // Increasing with u, and within a grid step of the even spread.
+            assert!(r.windows(2).all(|w| w[0] < w[1]), "light {idx}");
+            for (j, &x) in r.iter().enumerate() {
+                let even = (j as f64 + 0.5) / m as f64;
+                assert!(
+                    (x as f64 - even).abs() < 1.0 / m as f64,
+                    "light {idx}: {j}th at {x}"
+                );
+            }
+        }
+        // The largest draw below 1 stays below 1 after the remap.
+        let (_, _, rest) = world.choose_light(1.0 - f32::EPSILON / 2.0);
+        assert!(rest < 1.0);
     }
 
     /// A point light 10⁸ dimmer than another, lighting a Lambertian floor

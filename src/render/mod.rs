@@ -34,8 +34,9 @@
 //!   with a wavelength-dependent ior does the same when a path first meets it.
 //! - Bounces: `max_bounces` counts scattering events as pbrt's maxdepth;
 //!   Mitsuba's `max_depth = d` equals `max_bounces = d − 1`. Russian roulette
-//!   starts after the second bounce with survival probability
-//!   min(1, max-band throughput).
+//!   starts after the second bounce with survival probability min(1, m/m₁):
+//!   the throughput's largest band relative to the same after the first
+//!   bounce (`path::roulette`).
 //! - Instruction set: the row kernel runs at the widest level of the CPU
 //!   (`simd::RenderIsa`: sse, avx2+fma, avx512f; `CAMSIM_RENDER_ISA` lowers
 //!   it), with the same bits at every level.
@@ -67,9 +68,9 @@
 //!   light transport (emitter edge excluded).
 //!   Converged images agree (mean Y ratio 0.9999, 16×16 blocks 0.40 % RMS).
 //!   Mitsuba's LLVM `render()` returns before its kernels run: time it to
-//!   completion. Russian roulette from the 2nd bounce (pbrt-v4) is as
-//!   efficient per unit time as from the 3rd…5th (measured with both
-//!   samplers).
+//!   completion. Russian roulette relative to the first bounce's
+//!   throughput (`path::roulette`) removed the green wall's excess noise
+//!   (`bench.rs`).
 
 // `!(x > 0.0)` is deliberate throughout: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]

@@ -7,9 +7,9 @@
 //!   one batch take `n` of the first 2^m ≥ n points of a 2-D Sobol sequence
 //!   (its first two dimensions, a (0,2)-sequence in base 2; all of them, a
 //!   (0,m,2)-net, when n is a power of two), and each 2-D draw of a path (film
-//!   position, lens position, light position, BSDF direction, …) takes its
-//!   own copy of that sequence, randomised independently. 1-D draws (light
-//!   choice, lobe choice, roulette, a dispersive camera's band) are the first
+//!   position, lens position, light choice and position, BSDF direction, …) takes its
+//!   own copy of that sequence, randomised independently. 1-D draws (lobe
+//!   choice, roulette, a dispersive camera's band) are the first
 //!   coordinate of a copy of their own; a band chosen inside the scene (a
 //!   dispersive dielectric, met by some samples only) comes from PCG32. This is "padding" as in pbrt's `PaddedSobolSampler`;
 //!   the randomisation is Owen's nested uniform scrambling, in the hash-based
@@ -76,14 +76,14 @@ impl SamplerKind {
 
 /// Draws (1-D or 2-D) per sample taken from scrambled Sobol copies; later
 /// draws come from the sample's PCG32 stream. A path uses 2 camera draws
-/// (film, lens; a third for a dispersive camera's band) and then 5 per bounce
-/// (light choice, light position, lobe, direction, roulette): 12 covers the
-/// camera and the first two bounces. Measured on the Mitsuba Cornell box at
+/// (film, lens; a third for a dispersive camera's band) and then 4 per bounce
+/// (light choice and position from one 2-D point, lobe, direction, roulette):
+/// 10 covers the camera and the first two bounces. Measured on the Mitsuba Cornell box at
 /// 32 spp in one batch (`camsim bench render`, 4 seeds, RMSE of Y against
 /// Mitsuba's converged image, light transport): 7 draws 13.97 %, 12 draws
 /// 13.71 %, 32 draws 13.68 %, at 2 %, 4 % and 12 % more time than the
 /// independent sampler.
-pub const LD_DRAWS: usize = 12;
+pub const LD_DRAWS: usize = 10;
 
 /// Lanes of the per-sample point arrays: `LD_DRAWS` rounded up to a vector
 /// width (16 f32/u32 = one AVX-512 register, two AVX2, four SSE).

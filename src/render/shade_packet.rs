@@ -21,7 +21,7 @@
 //! are correctly rounded IEEE operations in every vector width and Rust never
 //! contracts them into FMAs, and the one transcendental (sin/cos in the disk
 //! map) is the project's own polynomial. The lanes take the same draws in the
-//! same order as `scatter` (light choice, light position, lobe, direction,
+//! same order as `scatter` (light choice and position, lobe, direction,
 //! roulette). A branch `scatter` takes becomes a lane mask here: both sides
 //! are computed, the lane keeps the side its own values choose.
 //! `film::tests::every_isa_level_renders_the_same_bits` renders every
@@ -115,7 +115,6 @@ pub(super) fn shade_diffuse(
     // The bounce's draws, in `scatter`'s order.
     let (mut u1, mut u2) = ([0.5f32; LANES], [0.5f32; LANES]);
     let (mut v1, mut v2, mut u_rr) = ([0.5f32; LANES], [0.5f32; LANES], [0f32; LANES]);
-    let mut u_light = [0f32; LANES];
     let mut ended: LaneMask = 0;
     let mut go: LaneMask = 0;
     let mut emitters: LaneMask = 0;
@@ -139,7 +138,6 @@ pub(super) fn shade_diffuse(
         }
         go |= 1 << i;
         let sm = &mut smp[i];
-        u_light[i] = sm.get1d();
         (u1[i], u2[i]) = sm.get2d();
         let _u_lobe = sm.get1d();
         (v1[i], v2[i]) = sm.get2d();
@@ -233,7 +231,8 @@ pub(super) fn shade_diffuse(
             if !(wo_z[i] > 0.0) {
                 continue;
             }
-            let (idx, s) = world.choose_light(u_light[i]);
+            let (idx, s, u_rest) = world.choose_light(u1[i]);
+            u1[i] = u_rest;
             if !(s > 0.0) {
                 continue;
             }

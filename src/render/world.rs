@@ -72,6 +72,9 @@ pub struct LightSample<'a> {
     pub target: Option<(Vec3, Vec3, Vec3)>,
 }
 
+/// The largest f32 below 1: where a remapped draw is clamped to stay in [0, 1).
+const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
+
 pub struct World {
     pub accel: Accel,
     pub info: Vec<PrimInfo>,
@@ -89,7 +92,7 @@ pub struct World {
     pub bsdfs: Vec<Bsdf>,
     pub lights: Vec<LightKind>,
     pub light_pmf: Vec<f32>,
-    light_cdf: Vec<f32>,
+    pub(super) light_cdf: Vec<f32>,
     pub infinite: Vec<u32>,
     pub center: Vec3,
     pub radius: f32,
@@ -506,23 +509,37 @@ impl World {
         self.tri_ng[prim as usize]
     }
 
-    /// The light that draw `u0` selects and its selection probability.
-    /// Needs at least one light.
+    /// The light that draw `u` selects, its selection probability, and `u`
+    /// remapped to [0, 1) within the light's slice of the table, so one 2-D
+    /// point both picks the light and places the sample on it (a stratified
+    /// point stays stratified over every light's area, as the sample reuse of
+    /// pbrt-v4 and Mitsuba). Needs at least one light.
     #[inline(always)]
-    pub(super) fn choose_light(&self, u0: f32) -> (usize, f32) {
-        let idx = sample_cdf(&self.light_cdf, u0);
-        (idx, self.light_pmf[idx])
+    pub(super) fn choose_light(&self, u: f32) -> (usize, f32, f32) {
+        let idx = sample_cdf(&self.light_cdf, u);
+        let lo = if idx == 0 {
+            0.0
+        } else {
+            self.light_cdf[idx - 1]
+        };
+        let width = self.light_cdf[idx] - lo;
+        let u_rest = if width > 0.0 {
+            ((u - lo) / width).clamp(0.0, ONE_MINUS_EPSILON)
+        } else {
+            0.0
+        };
+        (idx, self.light_pmf[idx], u_rest)
     }
 
-    /// Pick a light and sample a direction to it from point `p`. The sample
-    /// references the light's spectrum: radiance arriving at `p` (unoccluded)
-    /// is `scale · spec`.
+    /// Pick a light with draw `u1` and sample a direction to it from point
+    /// `p` with (`u1` remapped, `u2`). The sample references the light's
+    /// spectrum: radiance arriving at `p` (unoccluded) is `scale · spec`.
     #[inline(always)]
-    pub fn sample_light(&self, p: Vec3, u0: f32, u1: f32, u2: f32) -> Option<LightSample<'_>> {
+    pub fn sample_light(&self, p: Vec3, u1: f32, u2: f32) -> Option<LightSample<'_>> {
         if self.lights.is_empty() {
             return None;
         }
-        let (idx, sel) = self.choose_light(u0);
+        let (idx, sel, u1) = self.choose_light(u1);
         if !(sel > 0.0) {
             return None;
         }
