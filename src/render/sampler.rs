@@ -152,11 +152,9 @@ impl BatchScramble {
         }
         // y = nus(sobol1(i)) = reverse(lk(reverse(sobol1(i)))), reverse(sobol1)
         // being the XOR of the bit-reversed columns selected by i's bits.
-        let mut yr = [0u32; LANES];
-        for (j, &w) in SOBOL1_REV_COLUMNS[..self.bits as usize].iter().enumerate() {
-            for (o, &il) in yr.iter_mut().zip(&i) {
-                *o ^= w & 0u32.wrapping_sub((il >> j) & 1);
-            }
+        let mut yr = i;
+        for o in &mut yr {
+            *o = sobol1_reversed(*o);
         }
         let mut y = [0f32; LANES];
         for ((o, &v), &s) in y.iter_mut().zip(&yr).zip(&self.sy) {
@@ -243,20 +241,22 @@ impl Sampler {
     }
 }
 
-/// Bit-reversed Sobol dimension-1 columns: w₀ = 1, wⱼ = wⱼ₋₁ ⊕ (wⱼ₋₁ ≪ 1)
-/// (the reversal of vⱼ = vⱼ₋₁ ⊕ (vⱼ₋₁ ≫ 1), v₀ = 2³¹).
-const fn sobol1_rev_columns() -> [u32; 32] {
-    let mut w = [0u32; 32];
-    w[0] = 1;
-    let mut j = 1;
-    while j < 32 {
-        w[j] = w[j - 1] ^ (w[j - 1] << 1);
-        j += 1;
-    }
-    w
+/// reverse(sobol1(i)): the XOR of the bit-reversed columns wⱼ (below) that
+/// the bits of `i` select. Bit k of wⱼ is C(j, k) mod 2, odd exactly when
+/// the bits of k are a subset of those of j (Lucas), so bit k of the result
+/// is the XOR of the bits j ⊇ k of `i`: a superset-sum transform, done as a
+/// butterfly over the five bits of a bit position (15 operations for any
+/// number of index bits, against 5 per index bit summing the columns).
+#[inline(always)]
+fn sobol1_reversed(i: u32) -> u32 {
+    let mut y = i;
+    y ^= (y >> 1) & 0x5555_5555;
+    y ^= (y >> 2) & 0x3333_3333;
+    y ^= (y >> 4) & 0x0F0F_0F0F;
+    y ^= (y >> 8) & 0x00FF_00FF;
+    y ^= (y >> 16) & 0x0000_FFFF;
+    y
 }
-
-const SOBOL1_REV_COLUMNS: [u32; 32] = sobol1_rev_columns();
 
 /// Laine–Karras style hash permutation: every output bit depends only on the
 /// input bits below it (the multiplications carry upwards only), which is
@@ -293,6 +293,47 @@ mod tests {
             v ^= v >> 1;
         }
         r
+    }
+
+    /// Bit-reversed Sobol dimension-1 columns: w₀ = 1, wⱼ = wⱼ₋₁ ⊕ (wⱼ₋₁ ≪ 1)
+    /// (the reversal of vⱼ = vⱼ₋₁ ⊕ (vⱼ₋₁ ≫ 1), v₀ = 2³¹).
+    const fn sobol1_rev_columns() -> [u32; 32] {
+        let mut w = [0u32; 32];
+        w[0] = 1;
+        let mut j = 1;
+        while j < 32 {
+            w[j] = w[j - 1] ^ (w[j - 1] << 1);
+            j += 1;
+        }
+        w
+    }
+
+    const SOBOL1_REV_COLUMNS: [u32; 32] = sobol1_rev_columns();
+
+    /// The butterfly equals the column sum it replaces and the textbook
+    /// dimension 1, bit-reversed, for every 16-bit index and random 32-bit ones.
+    #[test]
+    fn sobol1_butterfly_equals_the_column_sum() {
+        let column_sum = |i: u32| {
+            (0..32)
+                .filter(|j| i >> j & 1 != 0)
+                .fold(0u32, |y, j| y ^ SOBOL1_REV_COLUMNS[j])
+        };
+        let mut h = 0x1234_5678u32;
+        for k in 0..(1u32 << 16) + 4096 {
+            let i = if k < 1 << 16 {
+                k
+            } else {
+                h = h.wrapping_mul(0x9E37_79B9).wrapping_add(0x7F4A_7C15) ^ (h >> 15);
+                h
+            };
+            assert_eq!(sobol1_reversed(i), column_sum(i), "i = {i:#x}");
+            assert_eq!(
+                sobol1_reversed(i),
+                sobol_dim1(i).reverse_bits(),
+                "i = {i:#x}"
+            );
+        }
     }
 
     /// Owen's nested uniform scramble of a 32-bit fixed-point value: bit k is
