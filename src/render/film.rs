@@ -204,7 +204,8 @@ pub fn render_world_at(
 /// (returns 1).
 #[inline(always)]
 fn accumulate(acc: &mut [f64], l: &[f32], weight: f64) -> u64 {
-    if l.iter().any(|x| !x.is_finite()) {
+    // No early exit: a fold over every band vectorises.
+    if l.iter().fold(false, |bad, x| bad | !x.is_finite()) {
         return 1;
     }
     for (x, &l) in acc.iter_mut().zip(l) {
