@@ -67,7 +67,7 @@
 //!   paths/s (31 bands per path against 4 wavelengths), and with the Sobol
 //!   sampler in one batch its equal-time RMSE is 0.42 of Mitsuba's over all
 //!   pixels and 0.76 for light transport (emitter edge excluded).
-//!   Converged images agree (mean Y ratio 0.9999, 16×16 blocks 0.40 % RMS).
+//!   Converged images agree (mean Y ratio 0.9999, 16×16 blocks 0.38 % RMS).
 //!   Mitsuba's LLVM `render()` returns before its kernels run: time it to
 //!   completion. Russian roulette relative to the first bounce's
 //!   throughput (`path::roulette`) removed the green wall's excess noise
