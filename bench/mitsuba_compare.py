@@ -134,6 +134,8 @@ CAMSIM_CPU = []
 CAMSIM_ISA = []
 # Whether camsim traced 16 paths at a time (`packets=` of its bench line; default at avx2 and avx512, CAMSIM_RENDER_PACKETS=0|1 forces it).
 CAMSIM_PACKETS = []
+# Packets each row kept in flight, their rays regrouped before each cast (`in_flight=`; CAMSIM_PACKETS_IN_FLIGHT sets it).
+CAMSIM_IN_FLIGHT = []
 
 
 def machine_cpu():
@@ -165,6 +167,7 @@ def run_camsim(camsim, spp, seed, y_out, threads):
     kv = dict(re.findall(r"(\w+)=(\S+)", kv_line))
     CAMSIM_ISA.append(kv.get("render_isa", "?"))
     CAMSIM_PACKETS.append(kv.get("packets", "false") == "true")
+    CAMSIM_IN_FLIGHT.append(kv.get("in_flight", "1"))
     return read_pfm(y_out), float(kv["wall_s"]), float(kv["cpu_s"])
 
 
@@ -312,7 +315,7 @@ def main():
           f"equal-time RMSE {res[k_all][1]:.3f} (wall), {res[k_all][2]:.3f} (CPU); "
           f"light transport only {res[k_lt][1]:.3f} (wall); equal-spp RMSE {res[k_all][0]:.3f}  [RMSE < 1 = camsim better]; "
           f"CPU {machine_cpu()}, camsim kernel {CAMSIM_ISA[-1] if CAMSIM_ISA else '?'} "
-          f"({'16 paths at a time' if CAMSIM_PACKETS and CAMSIM_PACKETS[-1] else 'one path at a time'}), "
+          f"({f'16 paths at a time, {CAMSIM_IN_FLIGHT[-1]} packets in flight' if CAMSIM_PACKETS and CAMSIM_PACKETS[-1] else 'one path at a time'}), "
           f"camsim sampler {a.sampler} in {a.batches} batch(es), load {os.getloadavg()[0]:.1f}")
     with open(os.path.join(a.cache, "last_result.json"), "w") as f:
         json.dump({"load_average": os.getloadavg()[0], "cpu": machine_cpu(),

@@ -147,6 +147,11 @@ pub struct Manifest {
     /// manifests written before it was recorded.
     #[serde(default)]
     pub render_packets: bool,
+    /// Packets of 16 paths each image row kept in flight, their rays regrouped
+    /// before each cast (`render::film::packets_in_flight`; the same image
+    /// bits for any number); 0 in manifests written before it was recorded.
+    #[serde(default)]
+    pub render_packets_in_flight: usize,
     /// `[i, n]` for a shard run.
     pub shard: Option<[usize; 2]>,
     pub axes: Vec<String>,
@@ -179,6 +184,7 @@ impl Manifest {
             cpu: crate::machine::cpu().to_string(),
             render_isa: kernel.isa.name().to_string(),
             render_packets: kernel.packets,
+            render_packets_in_flight: if kernel.packets { kernel.in_flight } else { 0 },
             shard: shard.map(|(i, n)| [i, n]),
             axes: plan.axes.clone(),
             quality: plan.quality.clone(),

@@ -544,13 +544,16 @@ pub fn run(o: &BenchOptions) -> Result<String> {
     let kernel = super::film::Kernel::detect();
     let isa = kernel.isa.name();
     out += &format!("render kernel: {isa}\n");
-    out += if kernel.packets {
-        "render paths: 16 at a time (CAMSIM_RENDER_PACKETS=0 for one at a time)\n"
+    out += &if kernel.packets {
+        format!(
+            "render paths: 16 at a time, {} packets in flight per row, rays regrouped before each cast (CAMSIM_RENDER_PACKETS=0 for one at a time, CAMSIM_PACKETS_IN_FLIGHT to change)\n",
+            kernel.in_flight
+        )
     } else {
-        "render paths: one at a time (CAMSIM_RENDER_PACKETS=1 for 16 at a time)\n"
+        "render paths: one at a time (CAMSIM_RENDER_PACKETS=1 for 16 at a time)\n".to_string()
     };
     let mut kv = format!(
-        "camsim-bench spp={} wall_s={:.4} cpu_s={:.4} paths_per_s={:.1} mean_y={:.6} render_isa={isa} packets={} batches={} sampler={}",
+        "camsim-bench spp={} wall_s={:.4} cpu_s={:.4} paths_per_s={:.1} mean_y={:.6} render_isa={isa} packets={} batches={} sampler={} in_flight={}",
         o.spp,
         timed.render_s,
         cpu,
@@ -558,7 +561,8 @@ pub fn run(o: &BenchOptions) -> Result<String> {
         mean(&y),
         kernel.packets,
         settings.batches.clamp(1, o.spp),
-        o.sampler.name()
+        o.sampler.name(),
+        if kernel.packets { kernel.in_flight } else { 0 }
     );
     if let Some(p) = &o.y_out {
         write_pfm(p, film.width_px as usize, film.height_px as usize, &y)?;

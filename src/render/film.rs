@@ -1,9 +1,12 @@
 //! The film: pixel sampling, camera weights, batch statistics, labels and
 //! depth, parallel over image rows with per-pixel seeding.
 
-use super::integrator::{PacketScratch, Scratch, first_hit, step_packet, trace};
+use super::integrator::{
+    PacketScratch, Scratch, add_unblocked, first_hit, packet_rays, shade_hits, trace,
+};
 use super::path::PathState;
 use super::ray_packet::{ALL_LANES, LANES, LaneMask, lanes};
+use super::ray_stream::RayStream;
 use super::sampler::{BatchScramble, Sampler, SamplerKind};
 use super::sampling::Rng;
 use super::settings::RenderSettings;
@@ -65,23 +68,27 @@ pub fn render_world(
     )
 }
 
-/// How the row kernel runs: its instruction set and whether a pixel's paths
-/// are traced 16 at a time (`packets`) or one by one. Every choice renders
-/// the same bits.
+/// How the row kernel runs: its instruction set, whether a pixel's paths
+/// are traced 16 at a time (`packets`) or one by one, and how many packets
+/// a row keeps in flight (`in_flight`, whose rays are regrouped before
+/// each cast; `ray_stream`). Every choice renders the same bits.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Kernel {
     pub isa: RenderIsa,
     pub packets: bool,
+    pub in_flight: usize,
 }
 
 impl Kernel {
-    /// The widest instruction set of this machine (`RenderIsa::detect`) and
-    /// its default path mode, or `CAMSIM_RENDER_PACKETS` (`packets_enabled`).
+    /// The widest instruction set of this machine (`RenderIsa::detect`), its
+    /// default path mode or `CAMSIM_RENDER_PACKETS` (`packets_enabled`), and
+    /// `packets_in_flight`.
     pub fn detect() -> Self {
         let isa = RenderIsa::detect();
         Kernel {
             isa,
             packets: packets_enabled(isa),
+            in_flight: packets_in_flight(),
         }
     }
 }
@@ -168,6 +175,7 @@ pub fn render_world_at(
         mid_nm,
         wsets: &wsets,
         packets: kernel.packets,
+        in_flight: kernel.in_flight.max(1),
     };
     let work = |r: RowSlices| job.row_at(kernel.isa, r);
 
@@ -215,8 +223,9 @@ fn accumulate(acc: &mut [f64], l: &[f32], weight: f64) -> u64 {
 }
 
 /// Whether a row's samples are traced 16 paths at a time
-/// (`integrator::step_packet`, packet traversal, Lambertian hits shaded in
-/// structure of arrays, lanes refilled from the row's stream as paths end)
+/// (packet traversal of the rays of `packets_in_flight` packets regrouped by
+/// `ray_stream`, Lambertian hits shaded in structure of arrays, lanes
+/// refilled from the row's stream as paths end)
 /// at instruction set `isa`, or one by one. Same image bits either way.
 /// `CAMSIM_RENDER_PACKETS=1` / `=0` forces the choice (anything else is
 /// ignored with a warning); by default packets at AVX2 and AVX-512, where
@@ -237,6 +246,34 @@ pub fn packets_enabled(isa: RenderIsa) -> bool {
     forced.unwrap_or(isa >= RenderIsa::Avx2)
 }
 
+/// Packets of 16 paths a row keeps in flight in packet mode
+/// (`RowJob::row_packets`): 32 by default, or `CAMSIM_PACKETS_IN_FLIGHT`
+/// (1 to 256; anything else is ignored with a warning). Their rays are
+/// sorted by direction and origin before each cast (`ray_stream`): the more
+/// packets, the more coherent the regrouped ones, against more path state
+/// per thread (≈ 9 KB a packet). On the bench's Cornell box (2026-11-28,
+/// AVX-512 EPYC, M paths/s, three rounds): 16 / 32 / 64 / 128 packets
+/// 3.63–3.80 / 3.86–3.90 / 3.84–3.89 / 3.72–3.79, one packet as before
+/// 3.74–3.80 (README, *Performance by machine*).
+pub fn packets_in_flight() -> usize {
+    static P: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
+    *P.get_or_init(|| match std::env::var("CAMSIM_PACKETS_IN_FLIGHT") {
+        Err(_) => DEFAULT_IN_FLIGHT,
+        Ok(v) => match v.parse::<usize>() {
+            Ok(n) if (1..=256).contains(&n) => n,
+            _ => {
+                eprintln!(
+                    "warning: CAMSIM_PACKETS_IN_FLIGHT=\"{v}\" ignored (expected 1 to 256); using {DEFAULT_IN_FLIGHT}"
+                );
+                DEFAULT_IN_FLIGHT
+            }
+        },
+    })
+}
+
+/// `packets_in_flight`'s default.
+const DEFAULT_IN_FLIGHT: usize = 32;
+
 /// What every row of one render shares.
 struct RowJob<'a> {
     world: &'a World,
@@ -249,8 +286,10 @@ struct RowJob<'a> {
     dispersive_cam: bool,
     mid_nm: f64,
     wsets: &'a [&'a [f32]],
-    /// Trace a row's paths 16 at a time (`row_packets`, `step_packet`).
+    /// Trace a row's paths 16 at a time (`row_packets`).
     packets: bool,
+    /// Packets in flight per row in packet mode.
+    in_flight: usize,
 }
 
 impl RowJob<'_> {
@@ -284,9 +323,9 @@ impl RowJob<'_> {
 
     /// Start sample `j` of batch `bi` of pixel (`px`, `py`): its sampler
     /// (point j of the batch's scrambled Sobol copies, so the batch's film
-    /// positions are stratified over the pixel; sampler.rs), its camera ray
-    /// and initial throughput in `beta`. `None`: the camera vignettes it.
-    #[allow(clippy::too_many_arguments)]
+    /// positions are stratified over the pixel; sampler.rs) and its camera
+    /// ray. `None`: the camera vignettes it. The path's initial throughput
+    /// is `init_beta`'s.
     #[inline(always)]
     fn start_sample(
         &self,
@@ -296,7 +335,6 @@ impl RowJob<'_> {
         scrambles: &[BatchScramble],
         (bi, j): (u32, u32),
         smp: &mut Sampler,
-        beta: &mut [f32],
     ) -> Option<(PathState, f64)> {
         let (world, film, s) = (self.world, self.film, self.s);
         let nb = world.bands;
@@ -328,6 +366,14 @@ impl RowJob<'_> {
             DVec2::new(ua as f64, ub as f64),
             lambda,
         )?;
+        Some((PathState::camera(o, d, hero), weight))
+    }
+
+    /// A new path's throughput: 1 in every band, or `nb` in its hero band
+    /// alone (a dispersive camera's sample).
+    #[inline(always)]
+    fn init_beta(&self, hero: Option<usize>, beta: &mut [f32]) {
+        let nb = self.world.bands;
         match hero {
             Some(b) => beta
                 .iter_mut()
@@ -339,7 +385,6 @@ impl RowJob<'_> {
                 beta[nb..].fill(0.0);
             }
         }
-        Some((PathState::camera(o, d, hero), weight))
     }
 
     /// Label and depth of pixel `ix` of the row `py` from the ray through the
@@ -422,15 +467,10 @@ impl RowJob<'_> {
                 self.pixel_scrambles(pixel_key, &mut scrambles);
                 out.acc.fill(0.0);
                 for &(bi, j) in &order {
-                    if let Some((st, w)) = self.start_sample(
-                        px,
-                        py,
-                        pixel_key,
-                        &scrambles,
-                        (bi, j),
-                        &mut smp,
-                        &mut sc.beta,
-                    ) {
+                    if let Some((st, w)) =
+                        self.start_sample(px, py, pixel_key, &scrambles, (bi, j), &mut smp)
+                    {
+                        self.init_beta(st.hero, &mut sc.beta);
                         trace(world, st.o, st.d, s.max_bounces, st.hero, &mut smp, &mut sc);
                         let a = &mut out.acc[bi as usize * nb..(bi as usize + 1) * nb];
                         out.nan += accumulate(a, &sc.l[..nb], w);
@@ -442,11 +482,14 @@ impl RowJob<'_> {
         (out.nan, out.wse)
     }
 
-    /// The row's pixels traced 16 paths at a time (`step_packet`) as one
-    /// stream of samples: pixel by pixel, each pixel's samples in batch
-    /// order, and a lane whose path ends takes the next sample of the stream
-    /// at once, of the same pixel or of the next ones, so the packets stay
-    /// full across pixel boundaries. Each sample's radiance waits in its
+    /// The row's pixels traced 16 paths at a time, `PACKETS` packets in
+    /// flight, as one stream of samples: pixel by pixel, each pixel's samples
+    /// in batch order, and a lane whose path ends takes the next sample of
+    /// the stream at once, of the same pixel or of the next ones, so the
+    /// packets stay full across pixel boundaries. Each bounce casts the rays
+    /// of all packets together, regrouped by direction and origin
+    /// (`ray_stream`), then shades each packet (`integrator::shade_hits`) and
+    /// casts their shadow rays together. Each sample's radiance waits in its
     /// pixel's slot until all the pixel's samples are traced; then the
     /// samples are accumulated in order and the pixel finished: every pixel
     /// is bit for bit what tracing its samples one by one gives.
@@ -461,87 +504,117 @@ impl RowJob<'_> {
     ) {
         let (world, s) = (self.world, self.s);
         let nb = world.bands;
-        let mut psc = PacketScratch::new(world.bands_padded);
-        let mut smps: Vec<Sampler> = (0..LANES)
-            .map(|_| Sampler::independent(Rng::for_sample(0, 0, 0)))
+        let np = self.in_flight;
+        let mut scs: Vec<PacketScratch> = (0..np)
+            .map(|_| PacketScratch::new(world.bands_padded))
             .collect();
-        let mut paths = [PathState::camera(Vec3::ZERO, Vec3::Z, None); LANES];
+        let mut smps: Vec<Vec<Sampler>> = (0..np)
+            .map(|_| {
+                (0..LANES)
+                    .map(|_| Sampler::independent(Rng::for_sample(0, 0, 0)))
+                    .collect()
+            })
+            .collect();
+        let mut paths = vec![[PathState::camera(Vec3::ZERO, Vec3::Z, None); LANES]; np];
+        let mut stream = RayStream::new(world, np);
         // Pixels in flight (slots reused through `free`), the slot and
-        // sample each lane traces.
+        // sample each lane of each packet traces.
         let mut slots: Vec<PixelSlot> = Vec::new();
         let mut free: Vec<usize> = Vec::new();
-        let mut lane_slot = [0usize; LANES];
-        let mut lane_sample = [0usize; LANES];
+        let mut lane_slot = vec![[0usize; LANES]; np];
+        let mut lane_sample = vec![[0usize; LANES]; np];
         // The pixel whose samples are being issued, and its slot.
         let mut next_ix = 0usize;
         let mut issuing: Option<usize> = None;
-        let mut alive: LaneMask = 0;
+        let mut alive: Vec<LaneMask> = vec![0; np];
+        let mut ended: Vec<LaneMask> = vec![0; np];
+        let mut unblocked: Vec<LaneMask> = vec![0; np];
         loop {
-            let mut idle = !alive & ALL_LANES;
-            while idle != 0 {
-                let k = match issuing {
-                    Some(k) => k,
-                    None if next_ix < self.roi.w as usize => {
-                        let k = free.pop().unwrap_or_else(|| {
-                            slots.push(PixelSlot::default());
-                            slots.len() - 1
-                        });
-                        let pixel_key = self.pixel_start(next_ix, py, lab, dep);
-                        let slot = &mut slots[k];
-                        slot.ix = next_ix;
-                        slot.pixel_key = pixel_key;
-                        self.pixel_scrambles(pixel_key, &mut slot.scrambles);
-                        slot.next = 0;
-                        slot.tracing = 0;
-                        slot.weights.clear();
-                        slot.weights.resize(order.len(), None);
-                        slot.radiance.resize(order.len() * nb, 0.0);
-                        next_ix += 1;
-                        issuing = Some(k);
-                        k
+            for g in 0..np {
+                let mut idle = !alive[g] & ALL_LANES;
+                while idle != 0 {
+                    let k = match issuing {
+                        Some(k) => k,
+                        None if next_ix < self.roi.w as usize => {
+                            let k = free.pop().unwrap_or_else(|| {
+                                slots.push(PixelSlot::default());
+                                slots.len() - 1
+                            });
+                            let pixel_key = self.pixel_start(next_ix, py, lab, dep);
+                            let slot = &mut slots[k];
+                            slot.ix = next_ix;
+                            slot.pixel_key = pixel_key;
+                            self.pixel_scrambles(pixel_key, &mut slot.scrambles);
+                            slot.next = 0;
+                            slot.tracing = 0;
+                            slot.weights.clear();
+                            slot.weights.resize(order.len(), None);
+                            slot.radiance.resize(order.len() * nb, 0.0);
+                            next_ix += 1;
+                            issuing = Some(k);
+                            k
+                        }
+                        None => break,
+                    };
+                    let slot = &mut slots[k];
+                    let lane = idle.trailing_zeros() as usize;
+                    let n = slot.next;
+                    slot.next += 1;
+                    let px = self.roi.x + slot.ix as u32;
+                    if let Some((st, w)) = self.start_sample(
+                        px,
+                        py,
+                        slot.pixel_key,
+                        &slot.scrambles,
+                        order[n],
+                        &mut smps[g][lane],
+                    ) {
+                        self.init_beta(st.hero, scs[g].beta_mut(lane));
+                        paths[g][lane] = st;
+                        slot.weights[n] = Some(w);
+                        slot.tracing += 1;
+                        lane_slot[g][lane] = k;
+                        lane_sample[g][lane] = n;
+                        scs[g].clear_radiance(lane);
+                        alive[g] |= 1 << lane;
+                        idle &= idle - 1;
                     }
-                    None => break,
-                };
-                let slot = &mut slots[k];
-                let lane = idle.trailing_zeros() as usize;
-                let n = slot.next;
-                slot.next += 1;
-                let px = self.roi.x + slot.ix as u32;
-                if let Some((st, w)) = self.start_sample(
-                    px,
-                    py,
-                    slot.pixel_key,
-                    &slot.scrambles,
-                    order[n],
-                    &mut smps[lane],
-                    psc.beta_mut(lane),
-                ) {
-                    paths[lane] = st;
-                    slot.weights[n] = Some(w);
-                    slot.tracing += 1;
-                    lane_slot[lane] = k;
-                    lane_sample[lane] = n;
-                    psc.clear_radiance(lane);
-                    alive |= 1 << lane;
-                    idle &= idle - 1;
-                }
-                if slot.next == order.len() {
-                    issuing = None;
-                    self.finish_if_traced(slot, k, order, out, &mut free);
+                    if slot.next == order.len() {
+                        issuing = None;
+                        self.finish_if_traced(slot, k, order, out, &mut free);
+                    }
                 }
             }
-            if alive == 0 {
+            if alive.iter().all(|&a| a == 0) {
                 break;
             }
-            let ended = step_packet(world, &mut paths, alive, s.max_bounces, &mut smps, &mut psc);
-            for lane in lanes(ended) {
-                let (k, n) = (lane_slot[lane], lane_sample[lane]);
-                let slot = &mut slots[k];
-                slot.radiance[n * nb..(n + 1) * nb].copy_from_slice(&psc.radiance(lane)[..nb]);
-                slot.tracing -= 1;
-                self.finish_if_traced(slot, k, order, out, &mut free);
+            for g in 0..np {
+                packet_rays(&paths[g], alive[g], &mut scs[g]);
             }
-            alive &= !ended;
+            stream.intersect(world, &mut scs);
+            for g in 0..np {
+                ended[g] = shade_hits(
+                    world,
+                    &mut paths[g],
+                    alive[g],
+                    s.max_bounces,
+                    &mut smps[g],
+                    &mut scs[g],
+                );
+            }
+            stream.unoccluded(world, &scs, &mut unblocked);
+            for g in 0..np {
+                add_unblocked(unblocked[g], &mut scs[g]);
+                for lane in lanes(ended[g]) {
+                    let (k, n) = (lane_slot[g][lane], lane_sample[g][lane]);
+                    let slot = &mut slots[k];
+                    slot.radiance[n * nb..(n + 1) * nb]
+                        .copy_from_slice(&scs[g].radiance(lane)[..nb]);
+                    slot.tracing -= 1;
+                    self.finish_if_traced(slot, k, order, out, &mut free);
+                }
+                alive[g] &= !ended[g];
+            }
         }
     }
 
@@ -687,7 +760,8 @@ mod tests {
     /// one or 16 at a time, renders the same image bit for bit (irradiance,
     /// standard errors, labels, depth): the levels do the same IEEE
     /// operations in the same order (`simd.rs`), and a path in a packet the
-    /// same operations as alone (`integrator::step_packet`). The Cornell box
+    /// same operations as alone (`integrator::shade_hits`), in any packet of
+    /// any number in flight (`ray_stream`). The Cornell box
     /// exercises diffuse and area-light paths, roulette and MIS; 40 spp in 3
     /// batches (14, 13, 13 samples) fill the 16 lanes, refill each lane as its
     /// path ends (from the next pixel too), and leave lanes empty at the
@@ -708,7 +782,15 @@ mod tests {
         let levels: Vec<Kernel> = RenderIsa::ALL
             .into_iter()
             .filter(|l| l.supported())
-            .flat_map(|isa| [false, true].map(|packets| Kernel { isa, packets }))
+            .flat_map(|isa| {
+                [(false, 1), (true, 1), (true, DEFAULT_IN_FLIGHT)].map(|(packets, in_flight)| {
+                    Kernel {
+                        isa,
+                        packets,
+                        in_flight,
+                    }
+                })
+            })
             .collect();
         let imgs: Vec<OpticalImage> = levels
             .iter()
@@ -760,9 +842,13 @@ mod tests {
         };
         let world = World::build(&scene, &s.grid, BvhKind::Bvh4).unwrap();
         let isa = RenderIsa::detect();
-        let render = |packets| {
+        let render = |packets, in_flight| {
             render_world_at(
-                Kernel { isa, packets },
+                Kernel {
+                    isa,
+                    packets,
+                    in_flight,
+                },
                 &world,
                 &cam,
                 &to_world,
@@ -772,7 +858,11 @@ mod tests {
             )
             .unwrap()
         };
-        let (one, packed) = (render(false), render(true));
+        let (one, packed, streamed) = (
+            render(false, 1),
+            render(true, 1),
+            render(true, DEFAULT_IN_FLIGHT),
+        );
         let nb = world.bands;
         let lit = |img: &OpticalImage| {
             img.irradiance
@@ -784,7 +874,9 @@ mod tests {
         let n = lit(&one);
         assert!(n > 0 && n < 24 * 24, "{n} lit pixels");
         let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-        assert!(bits(&one.irradiance) == bits(&packed.irradiance));
-        assert!(bits(&one.stderr) == bits(&packed.stderr));
+        for img in [&packed, &streamed] {
+            assert!(bits(&one.irradiance) == bits(&img.irradiance));
+            assert!(bits(&one.stderr) == bits(&img.stderr));
+        }
     }
 }

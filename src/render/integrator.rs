@@ -306,9 +306,10 @@ pub struct PacketScratch {
     l: Vec<f32>,
     pend: Vec<f32>,
     f: Vec<f32>,
-    rays: RayPacket,
-    hits: PacketHits,
-    shadows: RayPacket,
+    /// This bounce's rays, their closest hits and the shadow rays.
+    pub(super) rays: RayPacket,
+    pub(super) hits: PacketHits,
+    pub(super) shadows: RayPacket,
 }
 
 impl PacketScratch {
@@ -344,19 +345,34 @@ impl PacketScratch {
     }
 }
 
-/// One bounce of the paths in the lanes of `alive` (issue 17 item 1): their
-/// rays are cast as one packet; the lanes whose hits `World::packet_shadable`
-/// accepts (Lambertian triangles, triangle area lights) are shaded together
-/// in structure of arrays (`shade_packet::shade_diffuse`), every other lane
-/// on its own (`scatter`); then their shadow rays are cast as one packet.
-/// Lane `l` continues from `st[l]` with its throughput and radiance in `sc`;
-/// returns the lanes whose paths ended at this bounce (their radiance in
-/// `sc.l` is final). Each lane takes the same draws and does the same
-/// operations in the same order as `trace` does for that path, so a path
-/// traced bounce by bounce here, in any lane and beside any other paths,
-/// gives `trace`'s bits.
+// One bounce of a packet's paths (issue 17 item 1) is three steps, so that a
+// row can cast the rays of several packets together (`ray_stream`):
+// `packet_rays` (the live lanes' rays), the closest hits, `shade_hits` (the
+// lanes whose hits `World::packet_shadable` accepts — Lambertian triangles,
+// triangle area lights — shaded together in structure of arrays by
+// `shade_packet::shade_diffuse`, every other lane on its own by `scatter`;
+// their shadow rays), the shadow rays' occlusion, then `add_unblocked`. Lane
+// `l` continues from `st[l]` with its throughput and radiance in the packet's
+// `PacketScratch`. Each lane takes the same draws and does the same
+// operations in the same order as `trace` does for that path, so a path
+// traced bounce by bounce this way, in any lane and beside any other paths,
+// gives `trace`'s bits.
+
+/// A bounce's first step: the rays of the lanes `alive` into `sc.rays`.
 #[inline(always)]
-pub fn step_packet(
+pub fn packet_rays(st: &[PathState; LANES], alive: LaneMask, sc: &mut PacketScratch) {
+    sc.rays.active = 0;
+    for i in lanes(alive) {
+        sc.rays.set(i, st[i].o, st[i].d, f32::INFINITY);
+    }
+}
+
+/// A bounce's second step, once `sc.hits` holds the closest hits: shade the
+/// lanes `alive` — emission, next-event shadow rays into `sc.shadows` with
+/// their contributions pending, the next ray. Returns the lanes whose paths
+/// ended.
+#[inline(always)]
+pub fn shade_hits(
     world: &World,
     st: &mut [PathState; LANES],
     alive: LaneMask,
@@ -366,11 +382,6 @@ pub fn step_packet(
 ) -> LaneMask {
     let n = sc.stride;
     let mut ended: LaneMask = 0;
-    sc.rays.active = 0;
-    for i in lanes(alive) {
-        sc.rays.set(i, st[i].o, st[i].d, f32::INFINITY);
-    }
-    world.accel.intersect_packet(&sc.rays, &mut sc.hits);
     sc.shadows.active = 0;
     let mut together: LaneMask = 0;
     for i in lanes(alive) {
@@ -425,12 +436,17 @@ pub fn step_packet(
             &mut sc.shadows,
         );
     }
-    if sc.shadows.active != 0 {
-        for i in lanes(world.accel.unoccluded_packet(&sc.shadows)) {
-            add_pending(&mut sc.l[i * n..(i + 1) * n], &sc.pend[i * n..(i + 1) * n]);
-        }
-    }
     ended
+}
+
+/// Add the pending next-event contributions of the lanes `free` (shadow rays
+/// of `sc.shadows` found unblocked; a bounce's last step).
+#[inline(always)]
+pub fn add_unblocked(free: LaneMask, sc: &mut PacketScratch) {
+    let n = sc.stride;
+    for i in lanes(free) {
+        add_pending(&mut sc.l[i * n..(i + 1) * n], &sc.pend[i * n..(i + 1) * n]);
+    }
 }
 
 #[cfg(test)]

@@ -41,14 +41,18 @@
 //!   (`simd::RenderIsa`: sse, avx2+fma, avx512f; `CAMSIM_RENDER_ISA` lowers
 //!   it), with the same bits at every level.
 //! - Paths one at a time or in packets (`film::Kernel`): at AVX2 and AVX-512
-//!   a row's samples are traced 16 at a time (`integrator::step_packet`,
-//!   one bounce of every live path): the live paths' rays are cast as one
+//!   a row's samples are traced 16 at a time, 32 packets in flight
+//!   (`film::packets_in_flight`; one bounce of every live path is
+//!   `integrator::packet_rays`, `shade_hits`, `add_unblocked`): the live
+//!   paths' rays of all the row's packets are sorted by direction octant and
+//!   origin cell and cast 16 at a time in that order (`ray_stream.rs`), each
 //!   `RayPacket` through the packet traversal (`bvh4_packet.rs`, SIMD across
 //!   rays; AVX-512 intrinsics in `bvh4_packet_avx512.rs` at that level), the
 //!   hits on Lambertian triangles are shaded together in structure of arrays
 //!   (`shade_packet.rs`: hit points, frames, triangle-light samples, MIS,
 //!   cosine BSDF samples across the 16 lanes) and any other hit lane by lane
-//!   (`integrator::scatter`), then their shadow rays are cast as one packet;
+//!   (`integrator::scatter`), then their shadow rays are sorted and cast the
+//!   same way;
 //!   a lane whose path ends takes the next sample of the row's stream, of
 //!   the same pixel or the next (`film::RowJob::row_packets`), and each
 //!   pixel is accumulated in sample order when its last path ends. At SSE,
@@ -90,6 +94,7 @@ mod lanes;
 pub mod output;
 pub mod path;
 pub mod ray_packet;
+mod ray_stream;
 pub mod sampler;
 pub mod sampling;
 pub mod settings;
