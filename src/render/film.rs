@@ -504,7 +504,11 @@ impl RowJob<'_> {
     ) {
         let (world, s) = (self.world, self.s);
         let nb = world.bands;
-        let np = self.in_flight;
+        // No more packets than the row has samples to fill.
+        let np = self
+            .in_flight
+            .min((self.roi.w as usize * order.len()).div_ceil(LANES))
+            .max(1);
         let mut scs: Vec<PacketScratch> = (0..np)
             .map(|_| PacketScratch::new(world.bands_padded))
             .collect();
