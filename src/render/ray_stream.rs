@@ -129,11 +129,14 @@ impl RayStream {
         }
     }
 
-    /// Copy the rays `ids` (packet × 16 + lane) of `ray(p)` into `self.packet`.
+    /// Copy the next (up to) 16 rays of `order` from `start` — ray ids,
+    /// packet × 16 + lane, of `ray(p)` — into `self.packet`; returns where
+    /// the next packet starts.
     #[inline(always)]
-    fn gather<'a>(&mut self, ids: &[u32], ray: impl Fn(usize) -> &'a RayPacket) {
+    fn gather<'a>(&mut self, start: usize, ray: impl Fn(usize) -> &'a RayPacket) -> usize {
+        let end = (start + LANES).min(self.order.len());
         let pk = &mut self.packet;
-        for (k, &id) in ids.iter().enumerate() {
+        for (k, &id) in self.order[start..end].iter().enumerate() {
             let (p, l) = (id as usize / LANES, id as usize % LANES);
             let r = ray(p);
             for a in 0..3 {
@@ -142,7 +145,8 @@ impl RayStream {
             }
             pk.tmax[k] = r.tmax[l];
         }
-        pk.active = (1u32 << ids.len()) - 1;
+        pk.active = (1u32 << (end - start)) - 1;
+        end
     }
 
     /// The closest hit of every ray `scs[p].rays`, into `scs[p].hits`.
@@ -151,10 +155,7 @@ impl RayStream {
         self.sort(scs.len(), |p| &scs[p].rays);
         let mut start = 0;
         while start < self.order.len() {
-            let end = (start + LANES).min(self.order.len());
-            let ids = std::mem::take(&mut self.order);
-            self.gather(&ids[start..end], |p| &scs[p].rays);
-            self.order = ids;
+            let end = self.gather(start, |p| &scs[p].rays);
             world.accel.intersect_packet(&self.packet, &mut self.hits);
             for (k, &id) in self.order[start..end].iter().enumerate() {
                 let (p, l) = (id as usize / LANES, id as usize % LANES);
@@ -172,10 +173,7 @@ impl RayStream {
         self.sort(scs.len(), |p| &scs[p].shadows);
         let mut start = 0;
         while start < self.order.len() {
-            let end = (start + LANES).min(self.order.len());
-            let ids = std::mem::take(&mut self.order);
-            self.gather(&ids[start..end], |p| &scs[p].shadows);
-            self.order = ids;
+            let end = self.gather(start, |p| &scs[p].shadows);
             let f = world.accel.unoccluded_packet(&self.packet);
             for k in lanes(f) {
                 let id = self.order[start + k] as usize;
