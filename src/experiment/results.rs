@@ -184,7 +184,7 @@ impl Manifest {
             cpu: crate::machine::cpu().to_string(),
             render_isa: kernel.isa.name().to_string(),
             render_packets: kernel.packets,
-            render_packets_in_flight: if kernel.packets { kernel.in_flight } else { 0 },
+            render_packets_in_flight: kernel.reported_in_flight(),
             shard: shard.map(|(i, n)| [i, n]),
             axes: plan.axes.clone(),
             quality: plan.quality.clone(),

@@ -562,7 +562,7 @@ pub fn run(o: &BenchOptions) -> Result<String> {
         kernel.packets,
         settings.batches.clamp(1, o.spp),
         o.sampler.name(),
-        if kernel.packets { kernel.in_flight } else { 0 }
+        kernel.reported_in_flight()
     );
     if let Some(p) = &o.y_out {
         write_pfm(p, film.width_px as usize, film.height_px as usize, &y)?;

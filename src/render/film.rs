@@ -91,6 +91,12 @@ impl Kernel {
             in_flight: packets_in_flight(),
         }
     }
+
+    /// Packets in flight per row as reported (bench line, manifest): 0 when
+    /// paths are traced one at a time.
+    pub fn reported_in_flight(&self) -> usize {
+        if self.packets { self.in_flight } else { 0 }
+    }
 }
 
 /// `render_world` with `kernel` (compiled for its instruction set; the
@@ -482,7 +488,7 @@ impl RowJob<'_> {
         (out.nan, out.wse)
     }
 
-    /// The row's pixels traced 16 paths at a time, `PACKETS` packets in
+    /// The row's pixels traced 16 paths at a time, `in_flight` packets in
     /// flight, as one stream of samples: pixel by pixel, each pixel's samples
     /// in batch order, and a lane whose path ends takes the next sample of
     /// the stream at once, of the same pixel or of the next ones, so the
@@ -504,38 +510,27 @@ impl RowJob<'_> {
     ) {
         let (world, s) = (self.world, self.s);
         let nb = world.bands;
-        // No more packets than the row has samples to fill.
+        // No more packets than the row has samples to fill (both ≥ 1).
         let np = self
             .in_flight
-            .min((self.roi.w as usize * order.len()).div_ceil(LANES))
-            .max(1);
+            .min((self.roi.w as usize * order.len()).div_ceil(LANES));
+        // Per packet its paths and lanes; its band buffers and rays in `scs`,
+        // one slice for `ray_stream`.
+        let mut pk: Vec<InFlight> = (0..np).map(|_| InFlight::new()).collect();
         let mut scs: Vec<PacketScratch> = (0..np)
             .map(|_| PacketScratch::new(world.bands_padded))
             .collect();
-        let mut smps: Vec<Vec<Sampler>> = (0..np)
-            .map(|_| {
-                (0..LANES)
-                    .map(|_| Sampler::independent(Rng::for_sample(0, 0, 0)))
-                    .collect()
-            })
-            .collect();
-        let mut paths = vec![[PathState::camera(Vec3::ZERO, Vec3::Z, None); LANES]; np];
+        let mut unblocked: Vec<LaneMask> = vec![0; np];
         let mut stream = RayStream::new(world, np);
-        // Pixels in flight (slots reused through `free`), the slot and
-        // sample each lane of each packet traces.
+        // Pixels in flight (slots reused through `free`).
         let mut slots: Vec<PixelSlot> = Vec::new();
         let mut free: Vec<usize> = Vec::new();
-        let mut lane_slot = vec![[0usize; LANES]; np];
-        let mut lane_sample = vec![[0usize; LANES]; np];
         // The pixel whose samples are being issued, and its slot.
         let mut next_ix = 0usize;
         let mut issuing: Option<usize> = None;
-        let mut alive: Vec<LaneMask> = vec![0; np];
-        let mut ended: Vec<LaneMask> = vec![0; np];
-        let mut unblocked: Vec<LaneMask> = vec![0; np];
         loop {
-            for g in 0..np {
-                let mut idle = !alive[g] & ALL_LANES;
+            for (p, sc) in pk.iter_mut().zip(scs.iter_mut()) {
+                let mut idle = !p.alive & ALL_LANES;
                 while idle != 0 {
                     let k = match issuing {
                         Some(k) => k,
@@ -571,16 +566,16 @@ impl RowJob<'_> {
                         slot.pixel_key,
                         &slot.scrambles,
                         order[n],
-                        &mut smps[g][lane],
+                        &mut p.smps[lane],
                     ) {
-                        self.init_beta(st.hero, scs[g].beta_mut(lane));
-                        paths[g][lane] = st;
+                        self.init_beta(st.hero, sc.beta_mut(lane));
+                        p.paths[lane] = st;
                         slot.weights[n] = Some(w);
                         slot.tracing += 1;
-                        lane_slot[g][lane] = k;
-                        lane_sample[g][lane] = n;
-                        scs[g].clear_radiance(lane);
-                        alive[g] |= 1 << lane;
+                        p.slot[lane] = k;
+                        p.sample[lane] = n;
+                        sc.clear_radiance(lane);
+                        p.alive |= 1 << lane;
                         idle &= idle - 1;
                     }
                     if slot.next == order.len() {
@@ -589,35 +584,27 @@ impl RowJob<'_> {
                     }
                 }
             }
-            if alive.iter().all(|&a| a == 0) {
+            if pk.iter().all(|p| p.alive == 0) {
                 break;
             }
-            for g in 0..np {
-                packet_rays(&paths[g], alive[g], &mut scs[g]);
+            for (p, sc) in pk.iter().zip(scs.iter_mut()) {
+                packet_rays(&p.paths, p.alive, sc);
             }
             stream.intersect(world, &mut scs);
-            for g in 0..np {
-                ended[g] = shade_hits(
-                    world,
-                    &mut paths[g],
-                    alive[g],
-                    s.max_bounces,
-                    &mut smps[g],
-                    &mut scs[g],
-                );
+            for (p, sc) in pk.iter_mut().zip(scs.iter_mut()) {
+                p.ended = shade_hits(world, &mut p.paths, p.alive, s.max_bounces, &mut p.smps, sc);
             }
             stream.unoccluded(world, &scs, &mut unblocked);
-            for g in 0..np {
-                add_unblocked(unblocked[g], &mut scs[g]);
-                for lane in lanes(ended[g]) {
-                    let (k, n) = (lane_slot[g][lane], lane_sample[g][lane]);
+            for ((p, sc), &free_lanes) in pk.iter_mut().zip(scs.iter_mut()).zip(&unblocked) {
+                add_unblocked(free_lanes, sc);
+                for lane in lanes(p.ended) {
+                    let (k, n) = (p.slot[lane], p.sample[lane]);
                     let slot = &mut slots[k];
-                    slot.radiance[n * nb..(n + 1) * nb]
-                        .copy_from_slice(&scs[g].radiance(lane)[..nb]);
+                    slot.radiance[n * nb..(n + 1) * nb].copy_from_slice(&sc.radiance(lane)[..nb]);
                     slot.tracing -= 1;
                     self.finish_if_traced(slot, k, order, out, &mut free);
                 }
-                alive[g] &= !ended[g];
+                p.alive &= !p.ended;
             }
         }
     }
@@ -734,6 +721,33 @@ struct PixelOut<'a> {
     counts: Vec<u32>,
     /// Non-finite samples dropped.
     nan: u64,
+}
+
+/// One packet of paths in flight in `row_packets`: per lane its path, its
+/// sampler, and the pixel slot and sample it traces.
+struct InFlight {
+    paths: [PathState; LANES],
+    smps: Vec<Sampler>,
+    slot: [usize; LANES],
+    sample: [usize; LANES],
+    /// Lanes tracing a path, and those whose path ended this bounce.
+    alive: LaneMask,
+    ended: LaneMask,
+}
+
+impl InFlight {
+    fn new() -> Self {
+        InFlight {
+            paths: [PathState::camera(Vec3::ZERO, Vec3::Z, None); LANES],
+            smps: (0..LANES)
+                .map(|_| Sampler::independent(Rng::for_sample(0, 0, 0)))
+                .collect(),
+            slot: [0; LANES],
+            sample: [0; LANES],
+            alive: 0,
+            ended: 0,
+        }
+    }
 }
 
 /// A pixel in flight in `row_packets`.
