@@ -546,7 +546,7 @@ pub fn run(o: &BenchOptions) -> Result<String> {
     out += &format!("render kernel: {isa}\n");
     out += &if kernel.packets {
         format!(
-            "render paths: 16 at a time, {} packets in flight per row, rays regrouped before each cast (CAMSIM_RENDER_PACKETS=0 for one at a time, CAMSIM_PACKETS_IN_FLIGHT to change)\n",
+            "render paths: 16 at a time, {} packets in flight per run of rows, rays regrouped before each cast (CAMSIM_RENDER_PACKETS=0 for one at a time, CAMSIM_PACKETS_IN_FLIGHT to change)\n",
             kernel.in_flight
         )
     } else {

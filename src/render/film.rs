@@ -19,7 +19,8 @@ use crate::{Error, Result};
 use glam::{DMat4, DVec2, DVec3, Vec3};
 use rayon::prelude::*;
 
-/// One image row: (row index, irradiance, stderr), labels, depth.
+/// One run of image rows (`rows_per_run`): (run index, irradiance,
+/// stderr), labels, depth.
 type RowSlices<'a> = (
     (((usize, &'a mut [f32]), &'a mut [f32]), &'a mut [u32]),
     &'a mut [f32],
@@ -70,7 +71,7 @@ pub fn render_world(
 
 /// How the row kernel runs: its instruction set, whether a pixel's paths
 /// are traced 16 at a time (`packets`) or one by one, and how many packets
-/// a row keeps in flight (`in_flight`, whose rays are regrouped before
+/// a run of rows keeps in flight (`in_flight`, whose rays are regrouped before
 /// each cast; `ray_stream`). Every choice renders the same bits.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Kernel {
@@ -92,7 +93,7 @@ impl Kernel {
         }
     }
 
-    /// Packets in flight per row as reported (bench line, manifest): 0 when
+    /// Packets in flight per run of rows as reported (bench line, manifest): 0 when
     /// paths are traced one at a time.
     pub fn reported_in_flight(&self) -> usize {
         if self.packets { self.in_flight } else { 0 }
@@ -153,7 +154,9 @@ pub fn render_world_at(
     img.spp = s.spp;
     let dispersive_cam = camera.is_dispersive();
     let mid_nm = grid.wavelength(nb / 2);
-    let row_len = roi.w as usize * nb;
+    let rows_per_run = rows_per_run(roi, s.spp);
+    let run_len = roi.w as usize * nb * rows_per_run;
+    let run_px = roi.w as usize * rows_per_run;
 
     // Standard errors of weighted band sums (e.g. a sensor channel's electron
     // rate), from the same batch means: bands of one path are correlated, so
@@ -182,16 +185,17 @@ pub fn render_world_at(
         wsets: &wsets,
         packets: kernel.packets,
         in_flight: kernel.in_flight.max(1),
+        rows_per_run,
     };
     let work = |r: RowSlices| job.row_at(kernel.isa, r);
 
     let run = |img: &mut OpticalImage| -> Vec<(u64, Vec<f32>)> {
         img.irradiance
-            .par_chunks_mut(row_len)
+            .par_chunks_mut(run_len)
             .enumerate()
-            .zip(img.stderr.par_chunks_mut(row_len))
-            .zip(img.labels.par_chunks_mut(roi.w as usize))
-            .zip(img.depth_m.par_chunks_mut(roi.w as usize))
+            .zip(img.stderr.par_chunks_mut(run_len))
+            .zip(img.labels.par_chunks_mut(run_px))
+            .zip(img.depth_m.par_chunks_mut(run_px))
             .map(work)
             .collect::<Vec<_>>()
     };
@@ -228,10 +232,10 @@ fn accumulate(acc: &mut [f64], l: &[f32], weight: f64) -> u64 {
     0
 }
 
-/// Whether a row's samples are traced 16 paths at a time
+/// Whether a run's samples are traced 16 paths at a time
 /// (packet traversal of the rays of `packets_in_flight` packets regrouped by
 /// `ray_stream`, Lambertian hits shaded in structure of arrays, lanes
-/// refilled from the row's stream as paths end)
+/// refilled from the run's stream as paths end)
 /// at instruction set `isa`, or one by one. Same image bits either way.
 /// `CAMSIM_RENDER_PACKETS=1` / `=0` forces the choice (anything else is
 /// ignored with a warning); by default packets at AVX2 and AVX-512, where
@@ -252,7 +256,7 @@ pub fn packets_enabled(isa: RenderIsa) -> bool {
     forced.unwrap_or(isa >= RenderIsa::Avx2)
 }
 
-/// Packets of 16 paths a row keeps in flight in packet mode
+/// Packets of 16 paths a run of rows keeps in flight in packet mode
 /// (`RowJob::row_packets`): 32 by default, or `CAMSIM_PACKETS_IN_FLIGHT`
 /// (1 to 256; anything else is ignored with a warning). Their rays are
 /// sorted by direction and origin before each cast (`ray_stream`): the more
@@ -292,10 +296,12 @@ struct RowJob<'a> {
     dispersive_cam: bool,
     mid_nm: f64,
     wsets: &'a [&'a [f32]],
-    /// Trace a row's paths 16 at a time (`row_packets`).
+    /// Trace a run's paths 16 at a time (`row_packets`).
     packets: bool,
-    /// Packets in flight per row in packet mode.
+    /// Packets in flight per run in packet mode.
     in_flight: usize,
+    /// Rows of one job (`rows_per_run`).
+    rows_per_run: usize,
 }
 
 impl RowJob<'_> {
@@ -393,12 +399,20 @@ impl RowJob<'_> {
         }
     }
 
-    /// Label and depth of pixel `ix` of the row `py` from the ray through the
-    /// pixel centre, pupil centre, and the pixel's PCG32 key.
+    /// Film pixel (px, py) of pixel `i` of the run whose first row is `y0`.
     #[inline(always)]
-    fn pixel_start(&self, ix: usize, py: u32, lab: &mut [u32], dep: &mut [f32]) -> u64 {
+    fn pixel_xy(&self, y0: u32, i: usize) -> (u32, u32) {
+        let w = self.roi.w as usize;
+        (self.roi.x + (i % w) as u32, y0 + (i / w) as u32)
+    }
+
+    /// Label and depth of pixel `ix` of the run whose first row is `y0`
+    /// from the ray through the pixel centre, pupil centre, and the pixel's
+    /// PCG32 key.
+    #[inline(always)]
+    fn pixel_start(&self, ix: usize, y0: u32, lab: &mut [u32], dep: &mut [f32]) -> u64 {
         let (film, camera) = (self.film, self.camera);
-        let px = self.roi.x + ix as u32;
+        let (px, py) = self.pixel_xy(y0, ix);
         let pixel_id = py as u64 * film.width_px as u64 + px as u64;
         let fc = DVec2::new(
             (px as f64 + 0.5 - film.width_px as f64 / 2.0) * film.pixel_pitch_m,
@@ -429,25 +443,20 @@ impl RowJob<'_> {
         }
     }
 
-    /// One image row: every sample of every pixel, then the pixel means and
-    /// standard errors. Returns the non-finite sample count and the weighted
+    /// One run of image rows (`rows_per_run`; its pixels row after row):
+    /// every sample of every pixel, then the pixel means and standard errors. Returns the non-finite sample count and the weighted
     /// standard errors.
     #[inline(always)]
-    fn row(&self, ((((row, irr), se), lab), dep): RowSlices) -> (u64, Vec<f32>) {
+    fn row(&self, ((((run, irr), se), lab), dep): RowSlices) -> (u64, Vec<f32>) {
         let (world, s, roi, batches) = (self.world, self.s, self.roi, self.batches);
+        // Pixels of this run (its last may have fewer rows).
+        let n_px = lab.len();
         let nb = world.bands;
         let nsets = self.wsets.len();
         let mut out = PixelOut {
             irr,
             se,
-            wse: vec![
-                0f32;
-                if batches > 1 {
-                    roi.w as usize * nsets
-                } else {
-                    0
-                }
-            ],
+            wse: vec![0f32; if batches > 1 { n_px * nsets } else { 0 }],
             mean_px: vec![0.0f64; nb],
             ss_px: vec![0.0f64; nb],
             acc: vec![0.0f64; nb * batches],
@@ -456,20 +465,20 @@ impl RowJob<'_> {
                 .collect(),
             nan: 0,
         };
-        let py = roi.y + row as u32;
+        let y0 = roi.y + (run * self.rows_per_run) as u32;
         // (batch, index in batch) of the pixel's samples in accumulation order.
         let order: Vec<(u32, u32)> = (0..batches)
             .flat_map(|bi| (0..batch_len(s.spp, batches, bi)).map(move |j| (bi as u32, j as u32)))
             .collect();
         if self.packets {
-            self.row_packets(py, &order, lab, dep, &mut out);
+            self.row_packets(y0, &order, lab, dep, &mut out);
         } else {
             let mut sc = Scratch::new(world.bands_padded);
             let mut smp = Sampler::independent(Rng::for_sample(0, 0, 0));
             let mut scrambles: Vec<BatchScramble> = Vec::with_capacity(batches);
-            for ix in 0..roi.w as usize {
-                let px = roi.x + ix as u32;
-                let pixel_key = self.pixel_start(ix, py, lab, dep);
+            for ix in 0..n_px {
+                let (px, py) = self.pixel_xy(y0, ix);
+                let pixel_key = self.pixel_start(ix, y0, lab, dep);
                 self.pixel_scrambles(pixel_key, &mut scrambles);
                 out.acc.fill(0.0);
                 for &(bi, j) in &order {
@@ -488,7 +497,7 @@ impl RowJob<'_> {
         (out.nan, out.wse)
     }
 
-    /// The row's pixels traced 16 paths at a time, `in_flight` packets in
+    /// The run's pixels traced 16 paths at a time, `in_flight` packets in
     /// flight, as one stream of samples: pixel by pixel, each pixel's samples
     /// in batch order, and a lane whose path ends takes the next sample of
     /// the stream at once, of the same pixel or of the next ones, so the
@@ -502,7 +511,7 @@ impl RowJob<'_> {
     #[inline(always)]
     fn row_packets(
         &self,
-        py: u32,
+        y0: u32,
         order: &[(u32, u32)],
         lab: &mut [u32],
         dep: &mut [f32],
@@ -513,7 +522,7 @@ impl RowJob<'_> {
         // No more packets than the row has samples to fill (both ≥ 1).
         let np = self
             .in_flight
-            .min((self.roi.w as usize * order.len()).div_ceil(LANES));
+            .min((lab.len() * order.len()).div_ceil(LANES));
         // Per packet its paths and lanes; its band buffers and rays in `scs`,
         // one slice for `ray_stream`.
         let mut pk: Vec<InFlight> = (0..np).map(|_| InFlight::new()).collect();
@@ -534,12 +543,12 @@ impl RowJob<'_> {
                 while idle != 0 {
                     let k = match issuing {
                         Some(k) => k,
-                        None if next_ix < self.roi.w as usize => {
+                        None if next_ix < lab.len() => {
                             let k = free.pop().unwrap_or_else(|| {
                                 slots.push(PixelSlot::default());
                                 slots.len() - 1
                             });
-                            let pixel_key = self.pixel_start(next_ix, py, lab, dep);
+                            let pixel_key = self.pixel_start(next_ix, y0, lab, dep);
                             let slot = &mut slots[k];
                             slot.ix = next_ix;
                             slot.pixel_key = pixel_key;
@@ -559,7 +568,7 @@ impl RowJob<'_> {
                     let lane = idle.trailing_zeros() as usize;
                     let n = slot.next;
                     slot.next += 1;
-                    let px = self.roi.x + slot.ix as u32;
+                    let (px, py) = self.pixel_xy(y0, slot.ix);
                     if let Some((st, w)) = self.start_sample(
                         px,
                         py,
@@ -700,6 +709,23 @@ impl RowJob<'_> {
     }
 }
 
+/// Rows a render job takes (one `RowJob::row` call): enough for about
+/// `PATHS_PER_RUN` paths, so that the packet kernel's pipeline of paths in flight
+/// fills and drains once per run instead of once per row, and its buffers
+/// are set up once; at most a sixteenth of the region's rows, so that the
+/// threads still share the work evenly. Each pixel's samples and their
+/// accumulation are the same whatever the run: same bits.
+fn rows_per_run(roi: Rect, spp: u32) -> usize {
+    let per_row = roi.w as usize * spp as usize;
+    PATHS_PER_RUN
+        .div_ceil(per_row.max(1))
+        .min(roi.h as usize / 16)
+        .max(1)
+}
+
+/// `rows_per_run`'s target paths per job.
+const PATHS_PER_RUN: usize = 1 << 15;
+
 /// Samples in batch `bi` of a pixel's `spp` split into `batches`: batch
 /// `bi` holds samples bi, bi + batches, …
 #[inline(always)]
@@ -824,6 +850,51 @@ mod tests {
             assert!(bits(&img.stderr) == bits(&imgs[0].stderr), "{l:?} stderr");
             assert_eq!(img.labels, imgs[0].labels, "{l:?}");
             assert!(bits(&img.depth_m) == bits(&imgs[0].depth_m), "{l:?} depth");
+        }
+    }
+
+    /// A job renders a run of rows (`rows_per_run`): a pixel's bits must not
+    /// depend on which run it falls in. A 32-row region goes in runs of two
+    /// rows; the same pixels rendered as four 8-row regions go one row at a
+    /// time, the runs starting on other rows.
+    #[test]
+    fn pixels_do_not_depend_on_the_run_of_rows() {
+        assert_eq!(rows_per_run(Rect::new(0, 0, 256, 256), 32), 4);
+        assert_eq!(rows_per_run(Rect::new(0, 0, 32, 32), 40), 2);
+        assert_eq!(rows_per_run(Rect::new(0, 0, 32, 8), 40), 1);
+        assert_eq!(rows_per_run(Rect::new(0, 0, 4000, 3000), 64), 1);
+        let (scene, film) = mitsuba_cornell_box();
+        let cam = Pinhole::new(39.3077, 1.0, &film).unwrap();
+        let to_world = scene.camera.as_ref().map(|c| c.to_world).unwrap();
+        let region = Rect::new(100, 20, 32, 32);
+        let s = RenderSettings {
+            spp: 40,
+            batches: 3,
+            threads: 2,
+            roi: Some(region),
+            ..Default::default()
+        };
+        let world = World::build(&scene, &s.grid, BvhKind::Bvh4).unwrap();
+        let whole = render_world(&world, &cam, &to_world, &film, &s, vec![]).unwrap();
+        let nb = world.bands;
+        for k in 0..4 {
+            let part_roi = Rect::new(region.x, region.y + 8 * k, region.w, 8);
+            let sk = RenderSettings {
+                roi: Some(part_roi),
+                ..s.clone()
+            };
+            let part = render_world(&world, &cam, &to_world, &film, &sk, vec![]).unwrap();
+            let off = (8 * k * region.w) as usize;
+            let n = part.labels.len();
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert!(
+                bits(&part.irradiance) == bits(&whole.irradiance[off * nb..(off + n) * nb]),
+                "rows {}..{}",
+                8 * k,
+                8 * k + 8
+            );
+            assert!(bits(&part.stderr) == bits(&whole.stderr[off * nb..(off + n) * nb]));
+            assert_eq!(part.labels, whole.labels[off..off + n]);
         }
     }
 

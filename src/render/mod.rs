@@ -41,10 +41,11 @@
 //!   (`simd::RenderIsa`: sse, avx2+fma, avx512f; `CAMSIM_RENDER_ISA` lowers
 //!   it), with the same bits at every level.
 //! - Paths one at a time or in packets (`film::Kernel`): at AVX2 and AVX-512
-//!   a row's samples are traced 16 at a time, 32 packets in flight
+//!   a run of rows' samples (`film::rows_per_run`, ≈ 32 768 paths) are
+//!   traced 16 at a time, 32 packets in flight
 //!   (`film::packets_in_flight`; one bounce of every live path is
 //!   `integrator::packet_rays`, `shade_hits`, `add_unblocked`): the live
-//!   paths' rays of all the row's packets are sorted by direction octant and
+//!   paths' rays of all the run's packets are sorted by direction octant and
 //!   origin cell and cast 16 at a time in that order (`ray_stream.rs`), each
 //!   `RayPacket` through the packet traversal (`bvh4_packet.rs`, SIMD across
 //!   rays; AVX-512 intrinsics in `bvh4_packet_avx512.rs` at that level), the
@@ -53,7 +54,7 @@
 //!   cosine BSDF samples across the 16 lanes) and any other hit lane by lane
 //!   (`integrator::scatter`), then their shadow rays are sorted and cast the
 //!   same way;
-//!   a lane whose path ends takes the next sample of the row's stream, of
+//!   a lane whose path ends takes the next sample of the run's stream, of
 //!   the same pixel or the next (`film::RowJob::row_packets`), and each
 //!   pixel is accumulated in sample order when its last path ends. At SSE,
 //!   or with `CAMSIM_RENDER_PACKETS=0`, each path is traced alone
