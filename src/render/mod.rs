@@ -69,10 +69,10 @@
 //!   their history are in the README (*Performance by machine*); on the
 //!   2-core AVX-512 EPYC (2026-11-28, 16 paths at a time, shading in
 //!   structure of arrays, relative roulette, rays regrouped across 32
-//!   packets, render jobs of several rows) camsim runs 1.23× Mitsuba's
+//!   packets, render jobs of several rows) camsim runs 1.18–1.19× Mitsuba's
 //!   paths/s (31 bands per path against 4 wavelengths), and with the Sobol
-//!   sampler in one batch its equal-time RMSE is 0.40 of Mitsuba's over all
-//!   pixels and 0.725 for light transport (emitter edge excluded).
+//!   sampler in one batch its equal-time RMSE is 0.41 of Mitsuba's over all
+//!   pixels and 0.74 for light transport (emitter edge excluded).
 //!   Converged images agree (mean Y ratio 0.9999, 16×16 blocks 0.38 % RMS).
 //!   Mitsuba's LLVM `render()` returns before its kernels run: time it to
 //!   completion. Russian roulette relative to the first bounce's
