@@ -21,7 +21,7 @@ use rayon::prelude::*;
 
 /// One run of image rows (`rows_per_run`): (run index, irradiance,
 /// stderr), labels, depth.
-type RowSlices<'a> = (
+type RunSlices<'a> = (
     (((usize, &'a mut [f32]), &'a mut [f32]), &'a mut [u32]),
     &'a mut [f32],
 );
@@ -172,7 +172,7 @@ pub fn render_world_at(
             "stderr weights must have one value per band ({nb})"
         )));
     }
-    let job = RowJob {
+    let job = RunJob {
         world,
         camera,
         to_world,
@@ -187,7 +187,7 @@ pub fn render_world_at(
         in_flight: kernel.in_flight.max(1),
         rows_per_run,
     };
-    let work = |r: RowSlices| job.row_at(kernel.isa, r);
+    let work = |r: RunSlices| job.run_at(kernel.isa, r);
 
     let run = |img: &mut OpticalImage| -> Vec<(u64, Vec<f32>)> {
         img.irradiance
@@ -257,7 +257,7 @@ pub fn packets_enabled(isa: RenderIsa) -> bool {
 }
 
 /// Packets of 16 paths a run of rows keeps in flight in packet mode
-/// (`RowJob::row_packets`): 32 by default, or `CAMSIM_PACKETS_IN_FLIGHT`
+/// (`RunJob::run_packets`): 32 by default, or `CAMSIM_PACKETS_IN_FLIGHT`
 /// (1 to 256; anything else is ignored with a warning). Their rays are
 /// sorted by direction and origin before each cast (`ray_stream`): the more
 /// packets, the more coherent the regrouped ones, against more path state
@@ -285,7 +285,7 @@ pub fn packets_in_flight() -> usize {
 const DEFAULT_IN_FLIGHT: usize = 32;
 
 /// What every row of one render shares.
-struct RowJob<'a> {
+struct RunJob<'a> {
     world: &'a World,
     camera: &'a dyn Camera,
     to_world: &'a DMat4,
@@ -296,7 +296,7 @@ struct RowJob<'a> {
     dispersive_cam: bool,
     mid_nm: f64,
     wsets: &'a [&'a [f32]],
-    /// Trace a run's paths 16 at a time (`row_packets`).
+    /// Trace a run's paths 16 at a time (`run_packets`).
     packets: bool,
     /// Packets in flight per run in packet mode.
     in_flight: usize,
@@ -304,33 +304,33 @@ struct RowJob<'a> {
     rows_per_run: usize,
 }
 
-impl RowJob<'_> {
-    /// Render one row with the kernel compiled for `isa` (`simd.rs`).
-    fn row_at(&self, isa: RenderIsa, r: RowSlices) -> (u64, Vec<f32>) {
+impl RunJob<'_> {
+    /// Render one run of rows with the kernel compiled for `isa` (`simd.rs`).
+    fn run_at(&self, isa: RenderIsa, r: RunSlices) -> (u64, Vec<f32>) {
         #[cfg(target_arch = "x86_64")]
         {
             match isa {
                 // SAFETY: the CPU supports the features the copy is built for.
-                RenderIsa::Avx512 if isa.supported() => return unsafe { self.row_avx512(r) },
+                RenderIsa::Avx512 if isa.supported() => return unsafe { self.run_avx512(r) },
                 // SAFETY: as above.
-                RenderIsa::Avx2 if isa.supported() => return unsafe { self.row_avx2(r) },
+                RenderIsa::Avx2 if isa.supported() => return unsafe { self.run_avx2(r) },
                 _ => {}
             }
         }
         let _ = isa;
-        self.row(r)
+        self.run(r)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
-    unsafe fn row_avx2(&self, r: RowSlices) -> (u64, Vec<f32>) {
-        self.row(r)
+    unsafe fn run_avx2(&self, r: RunSlices) -> (u64, Vec<f32>) {
+        self.run(r)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512dq,avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
-    unsafe fn row_avx512(&self, r: RowSlices) -> (u64, Vec<f32>) {
-        self.row(r)
+    unsafe fn run_avx512(&self, r: RunSlices) -> (u64, Vec<f32>) {
+        self.run(r)
     }
 
     /// Start sample `j` of batch `bi` of pixel (`px`, `py`): its sampler
@@ -406,13 +406,18 @@ impl RowJob<'_> {
         (self.roi.x + (i % w) as u32, y0 + (i / w) as u32)
     }
 
-    /// Label and depth of pixel `ix` of the run whose first row is `y0`
+    /// Label and depth of film pixel (`px`, `py`), pixel `ix` of the run,
     /// from the ray through the pixel centre, pupil centre, and the pixel's
     /// PCG32 key.
     #[inline(always)]
-    fn pixel_start(&self, ix: usize, y0: u32, lab: &mut [u32], dep: &mut [f32]) -> u64 {
+    fn pixel_start(
+        &self,
+        ix: usize,
+        (px, py): (u32, u32),
+        lab: &mut [u32],
+        dep: &mut [f32],
+    ) -> u64 {
         let (film, camera) = (self.film, self.camera);
-        let (px, py) = self.pixel_xy(y0, ix);
         let pixel_id = py as u64 * film.width_px as u64 + px as u64;
         let fc = DVec2::new(
             (px as f64 + 0.5 - film.width_px as f64 / 2.0) * film.pixel_pitch_m,
@@ -444,10 +449,11 @@ impl RowJob<'_> {
     }
 
     /// One run of image rows (`rows_per_run`; its pixels row after row):
-    /// every sample of every pixel, then the pixel means and standard errors. Returns the non-finite sample count and the weighted
-    /// standard errors.
+    /// every sample of every pixel, then the pixel means and standard
+    /// errors. Returns the non-finite sample count and the weighted standard
+    /// errors.
     #[inline(always)]
-    fn row(&self, ((((run, irr), se), lab), dep): RowSlices) -> (u64, Vec<f32>) {
+    fn run(&self, ((((run, irr), se), lab), dep): RunSlices) -> (u64, Vec<f32>) {
         let (world, s, roi, batches) = (self.world, self.s, self.roi, self.batches);
         // Pixels of this run (its last may have fewer rows).
         let n_px = lab.len();
@@ -471,14 +477,14 @@ impl RowJob<'_> {
             .flat_map(|bi| (0..batch_len(s.spp, batches, bi)).map(move |j| (bi as u32, j as u32)))
             .collect();
         if self.packets {
-            self.row_packets(y0, &order, lab, dep, &mut out);
+            self.run_packets(y0, &order, lab, dep, &mut out);
         } else {
             let mut sc = Scratch::new(world.bands_padded);
             let mut smp = Sampler::independent(Rng::for_sample(0, 0, 0));
             let mut scrambles: Vec<BatchScramble> = Vec::with_capacity(batches);
             for ix in 0..n_px {
                 let (px, py) = self.pixel_xy(y0, ix);
-                let pixel_key = self.pixel_start(ix, y0, lab, dep);
+                let pixel_key = self.pixel_start(ix, (px, py), lab, dep);
                 self.pixel_scrambles(pixel_key, &mut scrambles);
                 out.acc.fill(0.0);
                 for &(bi, j) in &order {
@@ -509,7 +515,7 @@ impl RowJob<'_> {
     /// samples are accumulated in order and the pixel finished: every pixel
     /// is bit for bit what tracing its samples one by one gives.
     #[inline(always)]
-    fn row_packets(
+    fn run_packets(
         &self,
         y0: u32,
         order: &[(u32, u32)],
@@ -519,7 +525,7 @@ impl RowJob<'_> {
     ) {
         let (world, s) = (self.world, self.s);
         let nb = world.bands;
-        // No more packets than the row has samples to fill (both ≥ 1).
+        // No more packets than the run has samples to fill (both ≥ 1).
         let np = self
             .in_flight
             .min((lab.len() * order.len()).div_ceil(LANES));
@@ -548,9 +554,11 @@ impl RowJob<'_> {
                                 slots.push(PixelSlot::default());
                                 slots.len() - 1
                             });
-                            let pixel_key = self.pixel_start(next_ix, y0, lab, dep);
+                            let xy = self.pixel_xy(y0, next_ix);
+                            let pixel_key = self.pixel_start(next_ix, xy, lab, dep);
                             let slot = &mut slots[k];
                             slot.ix = next_ix;
+                            slot.xy = xy;
                             slot.pixel_key = pixel_key;
                             self.pixel_scrambles(pixel_key, &mut slot.scrambles);
                             slot.next = 0;
@@ -568,7 +576,7 @@ impl RowJob<'_> {
                     let lane = idle.trailing_zeros() as usize;
                     let n = slot.next;
                     slot.next += 1;
-                    let (px, py) = self.pixel_xy(y0, slot.ix);
+                    let (px, py) = slot.xy;
                     if let Some((st, w)) = self.start_sample(
                         px,
                         py,
@@ -709,7 +717,7 @@ impl RowJob<'_> {
     }
 }
 
-/// Rows a render job takes (one `RowJob::row` call): enough for about
+/// Rows a render job takes (one `RunJob::run` call): enough for about
 /// `PATHS_PER_RUN` paths, so that the packet kernel's pipeline of paths in flight
 /// fills and drains once per run instead of once per row, and its buffers
 /// are set up once; at most a sixteenth of the region's rows, so that the
@@ -733,7 +741,7 @@ fn batch_len(spp: u32, batches: usize, bi: usize) -> usize {
     (spp as usize - bi).div_ceil(batches)
 }
 
-/// A row's outputs and the per-pixel buffers that fill them.
+/// A run's outputs and the per-pixel buffers that fill them.
 struct PixelOut<'a> {
     irr: &'a mut [f32],
     se: &'a mut [f32],
@@ -749,7 +757,7 @@ struct PixelOut<'a> {
     nan: u64,
 }
 
-/// One packet of paths in flight in `row_packets`: per lane its path, its
+/// One packet of paths in flight in `run_packets`: per lane its path, its
 /// sampler, and the pixel slot and sample it traces.
 struct InFlight {
     paths: [PathState; LANES],
@@ -776,11 +784,13 @@ impl InFlight {
     }
 }
 
-/// A pixel in flight in `row_packets`.
+/// A pixel in flight in `run_packets`.
 #[derive(Default)]
 struct PixelSlot {
-    /// Index in the row.
+    /// Index in the run.
     ix: usize,
+    /// Its film pixel (px, py).
+    xy: (u32, u32),
     pixel_key: u64,
     scrambles: Vec<BatchScramble>,
     /// The next of its samples to issue (index into the order).
@@ -809,7 +819,7 @@ mod tests {
     /// exercises diffuse and area-light paths, roulette and MIS; 40 spp in 3
     /// batches (14, 13, 13 samples) fill the 16 lanes, refill each lane as its
     /// path ends (from the next pixel too), and leave lanes empty at the
-    /// row's end.
+    /// run's end.
     #[test]
     fn every_isa_level_renders_the_same_bits() {
         let (scene, film) = mitsuba_cornell_box();

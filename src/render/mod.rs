@@ -55,7 +55,7 @@
 //!   (`integrator::scatter`), then their shadow rays are sorted and cast the
 //!   same way;
 //!   a lane whose path ends takes the next sample of the run's stream, of
-//!   the same pixel or the next (`film::RowJob::row_packets`), and each
+//!   the same pixel or the next (`film::RunJob::run_packets`), and each
 //!   pixel is accumulated in sample order when its last path ends. At SSE,
 //!   or with `CAMSIM_RENDER_PACKETS=0`, each path is traced alone
 //!   (`integrator::trace`; `=1` forces packets). Both render the same bits.

@@ -5,7 +5,7 @@
 //! `CAMSIM_RENDER_ISA=sse|avx2|avx512` lowers it (to compare levels; a level
 //! the machine lacks is never used), like `CAMSIM_SENSOR_ISA` for the sensor.
 //!
-//! How: the film's row kernel (`film::RowJob::row`), the integrator, BVH
+//! How: the film's row kernel (`film::RunJob::run`), the integrator, BVH
 //! traversal, light sampling and the BSDFs are `#[inline(always)]` down to
 //! the leaves, so each `#[target_feature]` entry point in `film.rs` gets its
 //! own copy of the whole kernel, in which the compiler uses the wider registers (the 31-band loops
