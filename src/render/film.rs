@@ -155,8 +155,9 @@ pub fn render_world_at(
     let dispersive_cam = camera.is_dispersive();
     let mid_nm = grid.wavelength(nb / 2);
     let rows_per_run = rows_per_run(roi, s.spp);
-    let run_len = roi.w as usize * nb * rows_per_run;
+    // Pixels of one job, and their band values.
     let run_px = roi.w as usize * rows_per_run;
+    let run_len = run_px * nb;
 
     // Standard errors of weighted band sums (e.g. a sensor channel's electron
     // rate), from the same batch means: bands of one path are correlated, so
@@ -284,7 +285,7 @@ pub fn packets_in_flight() -> usize {
 /// `packets_in_flight`'s default.
 const DEFAULT_IN_FLIGHT: usize = 32;
 
-/// What every row of one render shares.
+/// What every run of rows (one job) of one render shares.
 struct RunJob<'a> {
     world: &'a World,
     camera: &'a dyn Camera,
