@@ -73,6 +73,7 @@
 use super::{Camera, CameraRay};
 use crate::{Error, Result};
 use glam::{DVec2, DVec3};
+use pupil_boxes::PupilBoxes;
 use serde_json::{Value, json};
 use std::path::Path;
 
@@ -743,6 +744,9 @@ pub struct RtfCamera {
     reach_mm: Vec<f64>,
     /// Per wavelength: what `Rtf::transfer` needs, worked out once.
     plans: Vec<WavePlan>,
+    /// Per wavelength: its sampling boxes tabulated over film radius
+    /// (elliptical pass regions; `pupil_boxes`), or None (the exact box).
+    boxes: Vec<Option<PupilBoxes>>,
 }
 
 impl RtfCamera {
@@ -759,12 +763,34 @@ impl RtfCamera {
             .map(|w| Self::reach_of(w, film_distance_mm, rtf.thickness_mm))
             .collect();
         let plans = rtf.waves.iter().map(WavePlan::new).collect();
-        Ok(Self {
+        let mut cam = Self {
             rtf,
             film_distance_mm,
             reach_mm,
             plans,
-        })
+            boxes: Vec::new(),
+        };
+        cam.boxes = (0..cam.rtf.waves.len())
+            .map(|i| match &cam.rtf.waves[i].pass {
+                PassNoPass::Ellipses(e) => {
+                    let w = &cam.rtf.waves[i];
+                    PupilBoxes::new(e, |r| cam.probe_delta(w, cam.reach_mm[i], r))
+                }
+                PassNoPass::Circles(_) => None,
+            })
+            .collect();
+        Ok(cam)
+    }
+
+    /// Half-width δ of the input radii `sampling_box` probes around film
+    /// radius `r_film` (mm): the largest lateral slope reaching any pass
+    /// region of `w` (farthest reach `reach`) from the film point, carried
+    /// to the input plane, with 5 % to spare.
+    fn probe_delta(&self, w: &RtfWave, reach: f64, r_film: f64) -> f64 {
+        let g = self.input_plane_z_mm().abs();
+        let h = self.input_plane_z_mm() + w.pass.plane_distance_mm();
+        let slope = (r_film + reach) / h.abs().max(1e-9);
+        g * slope * 1.05
     }
     /// Farthest any pass region of `w` reaches, over input radii up to its
     /// largest (or, when unlimited, ten times the film distance or the lens
@@ -788,16 +814,12 @@ impl RtfCamera {
     /// Sampling box on the pass plane (rotated frame: film point on +y), mm:
     /// [x0, x1, y0, y1]; None when no input radius near r_film passes.
     pub fn sampling_box(&self, w: &RtfWave, r_film: f64) -> Option<[f64; 4]> {
-        let g = self.input_plane_z_mm().abs();
-        let h = self.input_plane_z_mm() + w.pass.plane_distance_mm();
-        // Largest lateral slope reaching any pass region from this film point.
-        // (precomputed for the camera's own tables; computed for any other)
+        // Reach precomputed for the camera's own tables; computed for any other.
         let reach = match self.rtf.waves.iter().position(|x| std::ptr::eq(x, w)) {
             Some(i) => self.reach_mm[i],
             None => Self::reach_of(w, self.film_distance_mm, self.rtf.thickness_mm),
         };
-        let slope = (r_film + reach) / h.abs().max(1e-9);
-        let delta = g * slope * 1.05;
+        let delta = self.probe_delta(w, reach, r_film);
         let mut b = [
             f64::INFINITY,
             f64::NEG_INFINITY,
@@ -833,7 +855,11 @@ impl Camera for RtfCamera {
         let w = &self.rtf.waves[wi];
         let p = -film_m * 1e3;
         let r = p.length();
-        let b = self.sampling_box(w, r)?;
+        let b = match self.boxes[wi].as_ref().map(|t| t.at(r)) {
+            Some(Ok(b)) => b?,
+            // No table, or a film radius beyond it: the exact box.
+            _ => self.sampling_box(w, r)?,
+        };
         let (s, c) = if r > 0.0 {
             (p.x / r, p.y / r)
         } else {
@@ -883,5 +909,6 @@ impl Camera for RtfCamera {
     }
 }
 
+mod pupil_boxes;
 #[cfg(test)]
 mod tests;
