@@ -34,6 +34,22 @@ pub trait Camera: Send + Sync {
     /// Returns None when the sample is blocked (vignetted) — that is a zero
     /// contribution, not a missing sample.
     fn sample_ray(&self, film_m: DVec2, u: DVec2, lambda_nm: f64) -> Option<CameraRay>;
+    /// `sample_ray` for several samples at once: `out[i]` is
+    /// `sample_ray(film_m[i], u[i], lambda_nm[i])`, bit for bit (all four
+    /// slices have one length). The renderer asks for the camera rays of a
+    /// packet's idle lanes together; a camera whose ray is a long chain of
+    /// dependent steps (the RTF) works on them side by side.
+    fn sample_rays(
+        &self,
+        film_m: &[DVec2],
+        u: &[DVec2],
+        lambda_nm: &[f64],
+        out: &mut [Option<CameraRay>],
+    ) {
+        for (((o, &f), &u), &l) in out.iter_mut().zip(film_m).zip(u).zip(lambda_nm) {
+            *o = self.sample_ray(f, u, l);
+        }
+    }
     /// True when ray geometry depends on wavelength (then the renderer uses
     /// hero-wavelength sampling instead of carrying all bands on one path).
     fn is_dispersive(&self) -> bool {

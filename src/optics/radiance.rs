@@ -39,6 +39,18 @@ impl<C: Camera + ?Sized> Camera for RadianceCamera<C> {
             .sample_ray(film_m, u, lambda_nm)
             .map(|r| CameraRay { weight: 1.0, ..r })
     }
+    fn sample_rays(
+        &self,
+        film_m: &[DVec2],
+        u: &[DVec2],
+        lambda_nm: &[f64],
+        out: &mut [Option<CameraRay>],
+    ) {
+        self.0.sample_rays(film_m, u, lambda_nm, out);
+        for r in out.iter_mut().flatten() {
+            r.weight = 1.0;
+        }
+    }
     fn is_dispersive(&self) -> bool {
         self.0.is_dispersive()
     }

@@ -395,6 +395,32 @@ impl FusedPolys {
     }
 }
 
+impl FusedPolys {
+    /// `eval` for `L` rays side by side (lane l of every table is ray l's),
+    /// the six outputs only: each lane's sums take `eval`'s operations in
+    /// `eval`'s order, so each value is `eval`'s bit for bit; the lanes are
+    /// independent chains, which is what lets a vector unit take several rays
+    /// per instruction and keep its adders busy (`camera_lanes`).
+    #[inline(always)]
+    fn eval_lanes<const L: usize>(
+        &self,
+        pr: &[[f64; L]],
+        px: &[[f64; L]],
+        py: &[[f64; L]],
+    ) -> [[f64; L]; 6] {
+        let mut acc = [[-0.0f64; L]; 6];
+        for (t, c) in self.terms.iter().zip(&self.coeff) {
+            let (a, b, d) = (&pr[t[0] as usize], &px[t[1] as usize], &py[t[2] as usize]);
+            for (acc_k, &ck) in acc.iter_mut().zip(c) {
+                for l in 0..L {
+                    acc_k[l] += ck * a[l] * b[l] * d[l];
+                }
+            }
+        }
+        acc
+    }
+}
+
 const OUT_NAMES: [&str; 6] = ["outx", "outy", "outz", "outdx", "outdy", "outdz"];
 
 /// A ray-transfer function.
@@ -684,9 +710,23 @@ impl Rtf {
         y: f64,
         d: DVec3,
     ) -> Option<(DVec3, DVec3)> {
+        let ray = self.rotate_in(w, x, y, d)?;
+        let v = if plan.powers <= SHORT_POWERS {
+            outputs_at::<SHORT_POWERS>(w, plan, &ray)
+        } else {
+            outputs_at::<MAX_POWERS>(w, plan, &ray)
+        };
+        self.rotate_out(&ray, v)
+    }
+
+    /// The first step of `transfer`: the input point (x, y) and direction
+    /// `d` rotated by ψ (sinψ = s, cosψ = c) so the point goes to (0, r);
+    /// None when the ray does not go forward or the pass/no-pass test
+    /// blocks it.
+    #[inline(always)]
+    fn rotate_in(&self, w: &RtfWave, x: f64, y: f64, d: DVec3) -> Option<InputRay> {
         let r = (x * x + y * y).sqrt();
         let (s, c) = if r > 0.0 { (x / r, y / r) } else { (0.0, 1.0) };
-        // Rotate by ψ (sinψ = s, cosψ = c): the input point goes to (0, r).
         let dx = d.x * c - d.y * s;
         let dy = d.x * s + d.y * c;
         if !(d.z > 0.0) {
@@ -696,26 +736,20 @@ impl Rtf {
         if !w.pass.passes(r, dx / d.z * l, r + dy / d.z * l) {
             return None;
         }
-        let deg = plan.powers;
-        let mut pr = [1.0; MAX_POWERS];
-        let mut px_ = [1.0; MAX_POWERS];
-        let mut py_ = [1.0; MAX_POWERS];
-        for i in 1..deg {
-            pr[i] = pr[i - 1] * r;
-            px_[i] = px_[i - 1] * dx;
-            py_[i] = py_[i - 1] * dy;
-        }
-        let fused = plan.fused.as_ref().map(|f| f.eval(&pr, &px_, &py_));
-        let ev = |k: usize| match &fused {
-            Some(v) => w.outputs[k].as_ref().map(|_| v[k]),
-            None => w.outputs[k].as_ref().map(|p| p.eval_pow(&pr, &px_, &py_)),
-        };
-        let (ox, oy) = (ev(0)?, ev(1)?);
-        let oz = ev(2).unwrap_or(
+        Some(InputRay { r, s, c, dx, dy })
+    }
+
+    /// The last step of `transfer`: the output ray from the six outputs'
+    /// values at `ray` (None: the table has no such output), rotated back
+    /// by −ψ.
+    #[inline(always)]
+    fn rotate_out(&self, ray: &InputRay, v: [Option<f64>; 6]) -> Option<(DVec3, DVec3)> {
+        let (ox, oy) = (v[0]?, v[1]?);
+        let oz = v[2].unwrap_or(
             self.plane_offset_input_mm + self.thickness_mm + self.plane_offset_output_mm,
         );
-        let (odx, ody) = (ev(3)?, ev(4)?);
-        let odz = match ev(5) {
+        let (odx, ody) = (v[3]?, v[4]?);
+        let odz = match v[5] {
             Some(z) => z,
             None => (1.0 - odx * odx - ody * ody).max(0.0).sqrt(),
         };
@@ -725,14 +759,49 @@ impl Rtf {
             return None;
         }
         let dir = dir / len;
-        // Rotate back by −ψ.
-        let back = |a: f64, b: f64| (a * c + b * s, -a * s + b * c);
-        let (bx, by) = back(ox, oy);
-        let (bdx, bdy) = back(dir.x, dir.y);
+        let (s, c) = (ray.s, ray.c);
+        let (bx, by) = (ox * c + oy * s, -ox * s + oy * c);
+        let (bdx, bdy) = (dir.x * c + dir.y * s, -dir.x * s + dir.y * c);
         let p = DVec3::new(bx, by, oz);
         let d = DVec3::new(bdx, bdy, dir.z);
         (p.is_finite() && d.is_finite()).then_some((p, d))
     }
+}
+
+/// A ray on the RTF's input plane in its input point's frame: the point at
+/// (0, r), the direction's rotated x and y components (dx, dy), and the
+/// rotation ψ that took it there (s = sinψ, c = cosψ).
+#[derive(Clone, Copy, Debug)]
+struct InputRay {
+    r: f64,
+    s: f64,
+    c: f64,
+    dx: f64,
+    dy: f64,
+}
+
+/// Power tables up to `SHORT_POWERS` (degree 7) fit a short array; the
+/// fitted tables are of degree 4 or 5, and a 64-entry table costs more to
+/// fill than the polynomials cost to evaluate.
+const SHORT_POWERS: usize = 8;
+
+/// The six outputs of `w` at `ray` (None where the table has none), with
+/// power tables of `N` ≥ `plan.powers` entries.
+#[inline(always)]
+fn outputs_at<const N: usize>(w: &RtfWave, plan: &WavePlan, ray: &InputRay) -> [Option<f64>; 6] {
+    let mut pr = [1.0; N];
+    let mut px = [1.0; N];
+    let mut py = [1.0; N];
+    for i in 1..plan.powers {
+        pr[i] = pr[i - 1] * ray.r;
+        px[i] = px[i - 1] * ray.dx;
+        py[i] = py[i - 1] * ray.dy;
+    }
+    let fused = plan.fused.as_ref().map(|f| f.eval(&pr, &px, &py));
+    std::array::from_fn(|k| match &fused {
+        Some(v) => w.outputs[k].as_ref().map(|_| v[k]),
+        None => w.outputs[k].as_ref().map(|p| p.eval_pow(&pr, &px, &py)),
+    })
 }
 
 /// An RTF used as a camera with the film `film_distance_mm` behind the rear vertex.
@@ -849,9 +918,24 @@ impl RtfCamera {
     }
 }
 
-impl Camera for RtfCamera {
-    fn sample_ray(&self, film_m: DVec2, u: DVec2, lambda_nm: f64) -> Option<CameraRay> {
-        let wi = self.rtf.wave_index(lambda_nm);
+/// A camera ray of an RTF camera up to the RTF's input plane: where it
+/// crosses the plane (`pin`, mm, film at z = 0), its unit direction and the
+/// weight of its pupil sample.
+#[derive(Clone, Copy, Debug)]
+struct FilmRay {
+    pin: DVec3,
+    d: DVec3,
+    weight: f64,
+}
+
+impl RtfCamera {
+    /// The first step of `sample_ray` for wavelength table `wi`: the film
+    /// point, a point of its sampling box on the pass plane (drawn with `u`),
+    /// and the ray between them carried to the input plane. None: no box
+    /// (no input radius near the film point passes) or a pass plane behind
+    /// the film.
+    #[inline(always)]
+    fn film_ray(&self, wi: usize, film_m: DVec2, u: DVec2) -> Option<FilmRay> {
         let w = &self.rtf.waves[wi];
         let p = -film_m * 1e3;
         let r = p.length();
@@ -879,16 +963,48 @@ impl Camera for RtfCamera {
         let weight = (b[1] - b[0]) * (b[3] - b[2]) * h * h / (dist2 * dist2);
         let d = v / dist2.sqrt();
         let t = z_in / d.z;
-        let pin = o + d * t;
-        let (po, pd) = self
-            .rtf
-            .transfer_planned(w, &self.plans[wi], pin.x, pin.y, d)?;
-        let origin = DVec3::new(po.x, po.y, z_in + po.z) * 1e-3;
-        (weight.is_finite() && origin.is_finite()).then_some(CameraRay {
-            origin,
-            direction: pd,
+        Some(FilmRay {
+            pin: o + d * t,
+            d,
             weight,
         })
+    }
+
+    /// The last step of `sample_ray`: the camera ray (metres) of `fr` whose
+    /// transfer through the RTF is `t` (None: blocked).
+    #[inline(always)]
+    fn camera_ray(&self, fr: &FilmRay, t: Option<(DVec3, DVec3)>) -> Option<CameraRay> {
+        let (po, pd) = t?;
+        let origin = DVec3::new(po.x, po.y, self.input_plane_z_mm() + po.z) * 1e-3;
+        (fr.weight.is_finite() && origin.is_finite()).then_some(CameraRay {
+            origin,
+            direction: pd,
+            weight: fr.weight,
+        })
+    }
+}
+
+impl Camera for RtfCamera {
+    fn sample_ray(&self, film_m: DVec2, u: DVec2, lambda_nm: f64) -> Option<CameraRay> {
+        let wi = self.rtf.wave_index(lambda_nm);
+        let fr = self.film_ray(wi, film_m, u)?;
+        let t = self.rtf.transfer_planned(
+            &self.rtf.waves[wi],
+            &self.plans[wi],
+            fr.pin.x,
+            fr.pin.y,
+            fr.d,
+        );
+        self.camera_ray(&fr, t)
+    }
+    fn sample_rays(
+        &self,
+        film_m: &[DVec2],
+        u: &[DVec2],
+        lambda_nm: &[f64],
+        out: &mut [Option<CameraRay>],
+    ) {
+        camera_lanes::sample_rays(self, film_m, u, lambda_nm, out);
     }
     fn is_dispersive(&self) -> bool {
         self.rtf.waves.len() > 1
@@ -909,6 +1025,7 @@ impl Camera for RtfCamera {
     }
 }
 
+mod camera_lanes;
 mod pupil_boxes;
 #[cfg(test)]
 mod tests;

@@ -13,7 +13,7 @@ use super::settings::RenderSettings;
 use super::simd::RenderIsa;
 use super::world::World;
 use crate::optical_image::{OpticalImage, Rect};
-use crate::optics::Camera;
+use crate::optics::{Camera, CameraRay};
 use crate::scene::FilmSpec;
 use crate::{Error, Result};
 use glam::{DMat4, DVec2, DVec3, Vec3};
@@ -35,7 +35,14 @@ fn camera_ray(
     u: DVec2,
     lambda_nm: f64,
 ) -> Option<(Vec3, Vec3, f64)> {
-    let r = camera.sample_ray(film_m, u, lambda_nm)?;
+    world_ray(to_world, camera.sample_ray(film_m, u, lambda_nm))
+}
+
+/// The world-space ray of camera ray `r` (None: vignetted, or a weight or
+/// ray the film cannot use).
+#[inline(always)]
+fn world_ray(to_world: &DMat4, r: Option<CameraRay>) -> Option<(Vec3, Vec3, f64)> {
+    let r = r?;
     if !(r.weight > 0.0) || !r.weight.is_finite() {
         return None;
     }
@@ -335,10 +342,8 @@ impl RunJob<'_> {
     }
 
     /// Start sample `j` of batch `bi` of pixel (`px`, `py`): its sampler
-    /// (point j of the batch's scrambled Sobol copies, so the batch's film
-    /// positions are stratified over the pixel; sampler.rs) and its camera
-    /// ray. `None`: the camera vignettes it. The path's initial throughput
-    /// is `init_beta`'s.
+    /// and its camera ray (`sample_draws`, `sample_path`). `None`: the
+    /// camera vignettes it. The path's initial throughput is `init_beta`'s.
     #[inline(always)]
     fn start_sample(
         &self,
@@ -349,6 +354,26 @@ impl RunJob<'_> {
         (bi, j): (u32, u32),
         smp: &mut Sampler,
     ) -> Option<(PathState, f64)> {
+        let d = self.sample_draws(px, py, pixel_key, scrambles, (bi, j), smp);
+        let ray = self.camera.sample_ray(d.film_m, d.u, d.lambda_nm);
+        self.sample_path(ray, d.hero)
+    }
+
+    /// The camera's draws of sample `j` of batch `bi` of pixel (`px`,
+    /// `py`), from its sampler, made in `smp` (point j of the batch's
+    /// scrambled Sobol copies, so the batch's film positions are stratified
+    /// over the pixel; sampler.rs): where on the film, where in the pupil,
+    /// and at which wavelength its camera ray is drawn.
+    #[inline(always)]
+    fn sample_draws(
+        &self,
+        px: u32,
+        py: u32,
+        pixel_key: u64,
+        scrambles: &[BatchScramble],
+        (bi, j): (u32, u32),
+        smp: &mut Sampler,
+    ) -> CameraDraws {
         let (world, film, s) = (self.world, self.film, self.s);
         let nb = world.bands;
         let (fw, fh, pitch) = (
@@ -366,19 +391,25 @@ impl RunJob<'_> {
             (px as f64 + fx as f64 - fw / 2.0) * pitch,
             (fh / 2.0 - (py as f64 + fy as f64)) * pitch,
         );
-        let (hero, lambda) = if self.dispersive_cam {
+        let (hero, lambda_nm) = if self.dispersive_cam {
             let b = ((smp.get1d() * nb as f32) as usize).min(nb - 1);
             (Some(b), s.grid.wavelength(b))
         } else {
             (None, self.mid_nm)
         };
-        let (o, d, weight) = camera_ray(
-            self.camera,
-            self.to_world,
+        CameraDraws {
             film_m,
-            DVec2::new(ua as f64, ub as f64),
-            lambda,
-        )?;
+            u: DVec2::new(ua as f64, ub as f64),
+            lambda_nm,
+            hero,
+        }
+    }
+
+    /// The path of a sample whose camera ray is `ray` (hero band `hero`),
+    /// and the sample's weight; None: vignetted.
+    #[inline(always)]
+    fn sample_path(&self, ray: Option<CameraRay>, hero: Option<usize>) -> Option<(PathState, f64)> {
+        let (o, d, weight) = world_ray(self.to_world, ray)?;
         Some((PathState::camera(o, d, hero), weight))
     }
 
@@ -538,6 +569,8 @@ impl RunJob<'_> {
             .collect();
         let mut unblocked: Vec<LaneMask> = vec![0; np];
         let mut stream = RayStream::new(world, np);
+        // The camera draws and rays of the samples being issued.
+        let mut cam = CameraBatch::new(np);
         // Pixels in flight (slots reused through `free`).
         let mut slots: Vec<PixelSlot> = Vec::new();
         let mut free: Vec<usize> = Vec::new();
@@ -545,9 +578,25 @@ impl RunJob<'_> {
         let mut next_ix = 0usize;
         let mut issuing: Option<usize> = None;
         loop {
-            for (p, sc) in pk.iter_mut().zip(scs.iter_mut()) {
-                let mut idle = !p.alive & ALL_LANES;
-                while idle != 0 {
+            // Every idle lane takes the run's next sample that the camera
+            // lets through, packet after packet and lane after lane, as
+            // when samples are issued one at a time (a vignetted sample
+            // leaves its lane to the next one). So that the camera can work
+            // on many rays side by side (`Camera::sample_rays`), as many
+            // samples as there are idle lanes are drawn first, their camera
+            // rays made together, and the ones that pass handed out in
+            // order; vignetted ones leave lanes idle for another round.
+            loop {
+                let want: usize = pk
+                    .iter()
+                    .map(|p| (!p.alive & ALL_LANES).count_ones() as usize)
+                    .sum();
+                if want == 0 {
+                    break;
+                }
+                // The next `want` samples of the run: (slot, sample) and draws.
+                cam.who.clear();
+                while cam.who.len() < want {
                     let k = match issuing {
                         Some(k) => k,
                         None if next_ix < lab.len() => {
@@ -573,19 +622,52 @@ impl RunJob<'_> {
                         }
                         None => break,
                     };
-                    let slot = &mut slots[k];
-                    let lane = idle.trailing_zeros() as usize;
-                    let n = slot.next;
-                    slot.next += 1;
+                    // A pixel is visited once a round: drawn to its end, or
+                    // the round's last (its next sample is `slot.next`).
+                    let slot = &slots[k];
+                    let m = (want - cam.who.len()).min(order.len() - slot.next);
                     let (px, py) = slot.xy;
-                    if let Some((st, w)) = self.start_sample(
-                        px,
-                        py,
-                        slot.pixel_key,
-                        &slot.scrambles,
-                        order[n],
-                        &mut p.smps[lane],
-                    ) {
+                    for (n, &bj) in order.iter().enumerate().skip(slot.next).take(m) {
+                        let j = cam.who.len();
+                        let d = self.sample_draws(
+                            px,
+                            py,
+                            slot.pixel_key,
+                            &slot.scrambles,
+                            bj,
+                            &mut cam.smps[j],
+                        );
+                        (cam.film_m[j], cam.u[j], cam.lambda_nm[j]) = (d.film_m, d.u, d.lambda_nm);
+                        cam.hero[j] = d.hero;
+                        cam.who.push((k, n));
+                    }
+                    if slot.next + m == order.len() {
+                        issuing = None;
+                    }
+                }
+                let drawn = cam.who.len();
+                if drawn == 0 {
+                    break;
+                }
+                self.camera.sample_rays(
+                    &cam.film_m[..drawn],
+                    &cam.u[..drawn],
+                    &cam.lambda_nm[..drawn],
+                    &mut cam.rays[..drawn],
+                );
+                // Hand the samples that pass to the idle lanes in order.
+                let mut pi = 0;
+                for j in 0..drawn {
+                    let (k, n) = cam.who[j];
+                    let slot = &mut slots[k];
+                    slot.next = n + 1;
+                    if let Some((st, w)) = self.sample_path(cam.rays[j], cam.hero[j]) {
+                        while pk[pi].alive & ALL_LANES == ALL_LANES {
+                            pi += 1;
+                        }
+                        let (p, sc) = (&mut pk[pi], &mut scs[pi]);
+                        let lane = (!p.alive & ALL_LANES).trailing_zeros() as usize;
+                        std::mem::swap(&mut p.smps[lane], &mut cam.smps[j]);
                         self.init_beta(st.hero, sc.beta_mut(lane));
                         p.paths[lane] = st;
                         slot.weights[n] = Some(w);
@@ -594,10 +676,8 @@ impl RunJob<'_> {
                         p.sample[lane] = n;
                         sc.clear_radiance(lane);
                         p.alive |= 1 << lane;
-                        idle &= idle - 1;
                     }
                     if slot.next == order.len() {
-                        issuing = None;
                         self.finish_if_traced(slot, k, order, out, &mut free);
                     }
                 }
@@ -781,6 +861,47 @@ impl InFlight {
             sample: [0; LANES],
             alive: 0,
             ended: 0,
+        }
+    }
+}
+
+/// What the camera needs to draw one sample's ray (`RunJob::sample_draws`),
+/// and the sample's hero band.
+struct CameraDraws {
+    film_m: DVec2,
+    u: DVec2,
+    lambda_nm: f64,
+    hero: Option<usize>,
+}
+
+/// The samples `run_packets` issues together: their samplers, their
+/// `CameraDraws` in columns (as `Camera::sample_rays` takes them) and their
+/// camera rays.
+struct CameraBatch {
+    /// Per sample: its pixel's slot and its number in the pixel.
+    who: Vec<(usize, usize)>,
+    smps: Vec<Sampler>,
+    film_m: Vec<DVec2>,
+    u: Vec<DVec2>,
+    lambda_nm: Vec<f64>,
+    hero: Vec<Option<usize>>,
+    rays: Vec<Option<CameraRay>>,
+}
+
+impl CameraBatch {
+    /// Room for one sample per lane of `packets` packets.
+    fn new(packets: usize) -> Self {
+        let n = packets * LANES;
+        CameraBatch {
+            who: Vec::with_capacity(n),
+            smps: (0..n)
+                .map(|_| Sampler::independent(Rng::for_sample(0, 0, 0)))
+                .collect(),
+            film_m: vec![DVec2::ZERO; n],
+            u: vec![DVec2::ZERO; n],
+            lambda_nm: vec![0.0; n],
+            hero: vec![None; n],
+            rays: vec![None; n],
         }
     }
 }
