@@ -501,6 +501,7 @@ impl RunJob<'_> {
             counts: (0..batches)
                 .map(|bi| batch_len(s.spp, batches, bi) as u32)
                 .collect(),
+            batch_w: vec![0.0f64; batches],
             nan: 0,
         };
         let y0 = roi.y + (run * self.rows_per_run) as u32;
@@ -753,6 +754,7 @@ impl RunJob<'_> {
             ss_px,
             acc,
             counts,
+            batch_w,
             ..
         } = out;
         let n = self.s.spp as f64;
@@ -786,10 +788,17 @@ impl RunJob<'_> {
                     .zip(mean_px.iter())
                     .map(|(&a, &m)| a as f64 * m)
                     .sum();
+                // Each batch's weighted mean, summed over the bands in order
+                // from −0.0 as `Iterator::sum` does, the batches side by side
+                // (independent sums the core overlaps; same bits).
+                batch_w.fill(-0.0);
+                for (j, &wb) in w.iter().enumerate() {
+                    for ((m, a), &c) in batch_w.iter_mut().zip(acc.chunks_exact(nb)).zip(&*counts) {
+                        *m += wb as f64 * a[j] / c.max(1) as f64;
+                    }
+                }
                 let mut q = 0.0f64;
-                for (a, &c) in acc.chunks_exact(nb).zip(counts.iter()) {
-                    let c = c.max(1) as f64;
-                    let m: f64 = w.iter().zip(a).map(|(&wb, &x)| wb as f64 * x / c).sum();
+                for &m in batch_w.iter() {
                     q += (m - mw) * (m - mw);
                 }
                 wse[ix * nsets + k] = (q / denom).sqrt() as f32;
@@ -834,6 +843,8 @@ struct PixelOut<'a> {
     acc: Vec<f64>,
     /// Samples per batch (vignetted ones included).
     counts: Vec<u32>,
+    /// Per batch: the pixel's weighted mean (one weight set at a time).
+    batch_w: Vec<f64>,
     /// Non-finite samples dropped.
     nan: u64,
 }

@@ -6,10 +6,11 @@
 //! sampling box, square roots and divisions to reach the input plane, the
 //! pass test, the power tables, six polynomials of 35 terms each summed in
 //! order, the output ray — so a core working on one ray at a time mostly
-//! waits for the result of the step before. Here up to eight rays go
-//! through each step together: the scalar steps run lane after lane in a
-//! loop (independent chains the core overlaps), and the polynomials are
-//! evaluated with the rays in vector lanes (`FusedPolys::eval_lanes`), in a
+//! waits for the result of the step before. Here many rays go
+//! through each step together: the scalar steps run sample after sample in a
+//! loop (independent chains the core overlaps), and the polynomials of the
+//! rays that pass the pass test (about half of a lens's pupil box) are
+//! evaluated with eight rays in vector lanes (`FusedPolys::eval_lanes`), in a
 //! copy of this code compiled for the widest instruction set the machine has.
 //!
 //! Same bits as `RtfCamera::sample_ray`: every lane calls the same steps
@@ -26,9 +27,8 @@ use super::{FilmRay, InputRay, RtfCamera, SHORT_POWERS};
 use crate::optics::{Camera, CameraRay};
 use glam::DVec2;
 
-/// Rays evaluated side by side: eight f64 lanes, one AVX-512 register (two
-/// AVX2 ones). The renderer asks for the rays of a packet's idle lanes, a
-/// handful at a time, so a wider batch would mostly compute empty lanes.
+/// Rays whose polynomials are evaluated side by side: eight f64 lanes, one
+/// AVX-512 register (two AVX2 ones).
 const LANES: usize = 8;
 
 /// `Camera::sample_rays` of `cam`.
@@ -86,7 +86,11 @@ unsafe fn sample_rays_avx2(
     sample_rays_here(cam, film_m, u, lambda_nm, out)
 }
 
-/// Up to `LANES` samples at a time.
+/// Samples taken through the scalar steps before their polynomials are
+/// evaluated: enough that the rays that pass fill whole lane groups.
+const CHUNK: usize = 64;
+
+/// `CHUNK` samples at a time.
 #[inline(always)]
 fn sample_rays_here(
     cam: &RtfCamera,
@@ -99,9 +103,9 @@ fn sample_rays_here(
     assert!(film_m.len() == n && u.len() == n && lambda_nm.len() == n);
     let mut i = 0;
     while i < n {
-        let m = (n - i).min(LANES);
+        let m = (n - i).min(CHUNK);
         let span = i..i + m;
-        lanes(
+        chunk(
             cam,
             &film_m[span.clone()],
             &u[span.clone()],
@@ -112,9 +116,10 @@ fn sample_rays_here(
     }
 }
 
-/// At most `LANES` samples side by side.
+/// At most `CHUNK` samples: the scalar steps sample after sample, then the
+/// polynomials of the rays that pass, `LANES` of them side by side.
 #[inline(always)]
-fn lanes(
+fn chunk(
     cam: &RtfCamera,
     film_m: &[DVec2],
     u: &[DVec2],
@@ -136,40 +141,46 @@ fn lanes(
         }
     };
     let w = &cam.rtf.waves[wi];
-    // The scalar steps up to the input plane's rotated ray, lane by lane.
-    let mut fr: [Option<FilmRay>; LANES] = [None; LANES];
-    let mut ray: [Option<InputRay>; LANES] = [None; LANES];
-    let (mut r, mut dx, mut dy) = ([0f64; LANES], [0f64; LANES], [0f64; LANES]);
+    // The steps up to the input plane's rotated ray; the rays that pass the
+    // pass test, in order, with their samples' places.
+    let mut fr: [Option<FilmRay>; CHUNK] = [None; CHUNK];
+    let mut pass: [(usize, Option<InputRay>); CHUNK] = [(0, None); CHUNK];
+    let mut np = 0;
     for l in 0..m {
+        out[l] = None;
         fr[l] = cam.film_ray(wi, film_m[l], u[l]);
-        if let Some(f) = &fr[l] {
-            ray[l] = cam.rtf.rotate_in(w, f.pin.x, f.pin.y, f.d);
-        }
-        if let Some(q) = &ray[l] {
-            (r[l], dx[l], dy[l]) = (q.r, q.dx, q.dy);
-        }
-    }
-    // Power tables and polynomials, the lanes side by side.
-    let mut pr = [[1f64; LANES]; SHORT_POWERS];
-    let mut px = [[1f64; LANES]; SHORT_POWERS];
-    let mut py = [[1f64; LANES]; SHORT_POWERS];
-    for i in 1..plan.powers {
-        for l in 0..LANES {
-            pr[i][l] = pr[i - 1][l] * r[l];
-            px[i][l] = px[i - 1][l] * dx[l];
-            py[i][l] = py[i - 1][l] * dy[l];
+        if let Some(f) = &fr[l]
+            && let Some(q) = cam.rtf.rotate_in(w, f.pin.x, f.pin.y, f.d)
+        {
+            pass[np] = (l, Some(q));
+            np += 1;
         }
     }
-    let v = fused.eval_lanes(&pr, &px, &py);
-    // The output rays, lane by lane.
-    for l in 0..m {
-        out[l] = match (&fr[l], &ray[l]) {
-            (Some(f), Some(q)) => {
-                let vals = [0, 1, 2, 3, 4, 5].map(|k| w.outputs[k].as_ref().map(|_| v[k][l]));
-                cam.camera_ray(f, cam.rtf.rotate_out(q, vals))
+    // Their polynomials, `LANES` rays side by side, and their output rays.
+    for group in pass[..np].chunks(LANES) {
+        let (mut r, mut dx, mut dy) = ([0f64; LANES], [0f64; LANES], [0f64; LANES]);
+        for (k, (_, q)) in group.iter().enumerate() {
+            if let Some(q) = q {
+                (r[k], dx[k], dy[k]) = (q.r, q.dx, q.dy);
             }
-            _ => None,
-        };
+        }
+        let mut pr = [[1f64; LANES]; SHORT_POWERS];
+        let mut px = [[1f64; LANES]; SHORT_POWERS];
+        let mut py = [[1f64; LANES]; SHORT_POWERS];
+        for i in 1..plan.powers {
+            for k in 0..LANES {
+                pr[i][k] = pr[i - 1][k] * r[k];
+                px[i][k] = px[i - 1][k] * dx[k];
+                py[i][k] = py[i - 1][k] * dy[k];
+            }
+        }
+        let v = fused.eval_lanes(&pr, &px, &py);
+        for (k, &(l, q)) in group.iter().enumerate() {
+            if let (Some(f), Some(q)) = (&fr[l], &q) {
+                let vals = [0, 1, 2, 3, 4, 5].map(|o| w.outputs[o].as_ref().map(|_| v[o][k]));
+                out[l] = cam.camera_ray(f, cam.rtf.rotate_out(q, vals));
+            }
+        }
     }
 }
 
