@@ -719,7 +719,8 @@ impl Rtf {
         self.rotate_out(&ray, v)
     }
 
-    /// The first step of `transfer`: the input point (x, y) and direction
+    /// The first step of `transfer` (restated lane-wise in
+    /// `camera_lanes::front_lanes`; keep the two alike): the input point (x, y) and direction
     /// `d` rotated by ψ (sinψ = s, cosψ = c) so the point goes to (0, r);
     /// None when the ray does not go forward or the pass/no-pass test
     /// blocks it.
@@ -929,7 +930,8 @@ struct FilmRay {
 }
 
 impl RtfCamera {
-    /// The first step of `sample_ray` for wavelength table `wi`: the film
+    /// The first step of `sample_ray` for wavelength table `wi` (restated
+    /// lane-wise in `camera_lanes::front_lanes`; keep the two alike): the film
     /// point, a point of its sampling box on the pass plane (drawn with `u`),
     /// and the ray between them carried to the input plane. None: no box
     /// (no input radius near the film point passes) or a pass plane behind

@@ -6,16 +6,21 @@
 //! sampling box, square roots and divisions to reach the input plane, the
 //! pass test, the power tables, six polynomials of 35 terms each summed in
 //! order, the output ray — so a core working on one ray at a time mostly
-//! waits for the result of the step before. Here many rays go
-//! through each step together: the scalar steps run sample after sample in a
-//! loop (independent chains the core overlaps), and the polynomials of the
-//! rays that pass the pass test (about half of a lens's pupil box) are
-//! evaluated with eight rays in vector lanes (`FusedPolys::eval_lanes`), in a
-//! copy of this code compiled for the widest instruction set the machine has.
+//! waits for the result of the step before. Here many rays go through each
+//! step together, with eight rays in the lanes of a vector, in a copy of this
+//! code compiled for the widest instruction set the machine has:
+//! - the steps up to the pass test (`front_lanes`: the arithmetic of
+//!   `RtfCamera::film_ray` and `Rtf::rotate_in`, twelve divisions and three
+//!   square roots a ray), with the table look-ups (sampling box, pass
+//!   region at the input radius) lane by lane;
+//! - the polynomials of the rays that pass (about half of a lens's pupil
+//!   box), gathered into full lane groups (`FusedPolys::eval_lanes`);
+//! - the output rays (`rotate_out`, `camera_ray`) sample after sample, as
+//!   independent chains the core overlaps.
 //!
-//! Same bits as `RtfCamera::sample_ray`: every lane calls the same steps
-//! (`film_ray`, `rotate_in`, `rotate_out`, `camera_ray`) and the polynomial
-//! lanes take the scalar evaluation's operations in its order; Rust never
+//! Same bits as `RtfCamera::sample_ray`: every lane takes the scalar steps'
+//! operations in their order (`front_lanes` restates `film_ray` and
+//! `rotate_in` lane-wise; `tests` compare every ray's bits), and Rust never
 //! fuses a multiply and an add, so the instruction set does not change a
 //! bit. Samples of different wavelength tables, tables whose outputs do not
 //! share their exponents, or of degree above 7 go one at a time.
@@ -145,14 +150,25 @@ fn chunk(
     // pass test, in order, with their samples' places.
     let mut fr: [Option<FilmRay>; CHUNK] = [None; CHUNK];
     let mut pass: [(usize, Option<InputRay>); CHUNK] = [(0, None); CHUNK];
+    let mut rays: [Option<InputRay>; CHUNK] = [None; CHUNK];
+    let mut l0 = 0;
+    while l0 < m {
+        let l1 = (l0 + LANES).min(m);
+        front_lanes(
+            cam,
+            wi,
+            &film_m[l0..l1],
+            &u[l0..l1],
+            &mut fr[l0..l1],
+            &mut rays[l0..l1],
+        );
+        l0 = l1;
+    }
     let mut np = 0;
     for l in 0..m {
         out[l] = None;
-        fr[l] = cam.film_ray(wi, film_m[l], u[l]);
-        if let Some(f) = &fr[l]
-            && let Some(q) = cam.rtf.rotate_in(w, f.pin.x, f.pin.y, f.d)
-        {
-            pass[np] = (l, Some(q));
+        if rays[l].is_some() {
+            pass[np] = (l, rays[l]);
             np += 1;
         }
     }
@@ -180,6 +196,147 @@ fn chunk(
                 let vals = [0, 1, 2, 3, 4, 5].map(|o| w.outputs[o].as_ref().map(|_| v[o][k]));
                 out[l] = cam.camera_ray(f, cam.rtf.rotate_out(q, vals));
             }
+        }
+    }
+}
+
+/// `RtfCamera::film_ray` and then `Rtf::rotate_in` for at most `LANES`
+/// samples of wavelength table `wi`, their arithmetic with the samples in
+/// vector lanes (the divisions and square roots eight to an instruction).
+/// Each lane takes the scalar steps' operations in their order, so `fr` and
+/// `rays` are theirs bit for bit (`tests`); table look-ups (the sampling
+/// box, the pass region at the input radius) stay lane by lane.
+#[inline(always)]
+fn front_lanes(
+    cam: &RtfCamera,
+    wi: usize,
+    film_m: &[DVec2],
+    u: &[DVec2],
+    fr: &mut [Option<FilmRay>],
+    rays: &mut [Option<InputRay>],
+) {
+    let m = fr.len();
+    let w = &cam.rtf.waves[wi];
+    let z_in = cam.input_plane_z_mm();
+    let l_pass = w.pass.plane_distance_mm();
+    let h = z_in + l_pass;
+    fr.fill(None);
+    rays.fill(None);
+    if !(h > 0.0) {
+        return;
+    }
+    type V = [f64; LANES];
+    let (mut px, mut py, mut r) = ([0f64; LANES], [0f64; LANES], [0f64; LANES]);
+    for l in 0..m {
+        let p = -film_m[l] * 1e3;
+        (px[l], py[l]) = (p.x, p.y);
+    }
+    for l in 0..LANES {
+        r[l] = (px[l] * px[l] + py[l] * py[l]).sqrt();
+    }
+    // The sampling box, lane by lane (unit boxes in lanes without one).
+    let mut b: [V; 4] = [[0.0; LANES], [1.0; LANES], [0.0; LANES], [1.0; LANES]];
+    let mut boxed = [false; LANES];
+    for l in 0..m {
+        let bl = match cam.boxes[wi].as_ref().map(|t| t.at(r[l])) {
+            Some(Ok(bl)) => bl,
+            _ => cam.sampling_box(w, r[l]),
+        };
+        if let Some(bl) = bl {
+            for (bk, v) in b.iter_mut().zip(bl) {
+                bk[l] = v;
+            }
+            boxed[l] = true;
+        }
+    }
+    // `film_ray`'s arithmetic.
+    let (mut pin_x, mut pin_y, mut pin_z) = ([0f64; LANES], [0f64; LANES], [0f64; LANES]);
+    let (mut dx, mut dy, mut dz, mut weight) =
+        ([0f64; LANES], [0f64; LANES], [1f64; LANES], [0f64; LANES]);
+    for l in 0..LANES {
+        let pos = r[l] > 0.0;
+        let (s, c) = (
+            if pos { px[l] / r[l] } else { 0.0 },
+            if pos { py[l] / r[l] } else { 1.0 },
+        );
+        let (ux, uy) = if l < m { (u[l].x, u[l].y) } else { (0.5, 0.5) };
+        let qx = b[0][l] + ux * (b[1][l] - b[0][l]);
+        let qy = b[2][l] + uy * (b[3][l] - b[2][l]);
+        let (qrx, qry) = (qx * c + qy * s, -qx * s + qy * c);
+        let (vx, vy, vz) = (qrx - px[l], qry - py[l], h - 0.0);
+        let dist2 = vx * vx + vy * vy + vz * vz;
+        weight[l] = (b[1][l] - b[0][l]) * (b[3][l] - b[2][l]) * h * h / (dist2 * dist2);
+        let len = dist2.sqrt();
+        (dx[l], dy[l], dz[l]) = (vx / len, vy / len, vz / len);
+        let t = z_in / dz[l];
+        (pin_x[l], pin_y[l], pin_z[l]) = (px[l] + dx[l] * t, py[l] + dy[l] * t, 0.0 + dz[l] * t);
+    }
+    // `rotate_in`'s arithmetic, up to the pass test.
+    let (mut ri, mut si, mut ci, mut rdx, mut rdy) = (
+        [0f64; LANES],
+        [0f64; LANES],
+        [1f64; LANES],
+        [0f64; LANES],
+        [0f64; LANES],
+    );
+    let (mut xp, mut yp) = ([0f64; LANES], [0f64; LANES]);
+    for l in 0..LANES {
+        let (x, y) = (pin_x[l], pin_y[l]);
+        ri[l] = (x * x + y * y).sqrt();
+        let pos = ri[l] > 0.0;
+        (si[l], ci[l]) = (
+            if pos { x / ri[l] } else { 0.0 },
+            if pos { y / ri[l] } else { 1.0 },
+        );
+        rdx[l] = dx[l] * ci[l] - dy[l] * si[l];
+        rdy[l] = dx[l] * si[l] + dy[l] * ci[l];
+        xp[l] = rdx[l] / dz[l] * l_pass;
+        yp[l] = ri[l] + rdy[l] / dz[l] * l_pass;
+    }
+    // The pass test: the region at each lane's input radius, then the test.
+    let mut passed = [false; LANES];
+    match &w.pass {
+        super::PassNoPass::Ellipses(e) => {
+            let mut ell: [V; 4] = [[0.0; LANES], [0.0; LANES], [1.0; LANES], [1.0; LANES]];
+            let mut has = [false; LANES];
+            for l in 0..m {
+                if let Some(q) = e.at(ri[l]) {
+                    for (ek, v) in ell.iter_mut().zip(q) {
+                        ek[l] = v;
+                    }
+                    has[l] = true;
+                }
+            }
+            for l in 0..LANES {
+                let a = ((xp[l] - ell[0][l]) / ell[2][l]).powi(2);
+                let c = ((yp[l] - ell[1][l]) / ell[3][l]).powi(2);
+                passed[l] = has[l] && a + c <= 1.0;
+            }
+        }
+        pass => {
+            for l in 0..m {
+                passed[l] = pass.passes(ri[l], xp[l], yp[l]);
+            }
+        }
+    }
+    for l in 0..m {
+        if !boxed[l] {
+            continue;
+        }
+        let d = glam::DVec3::new(dx[l], dy[l], dz[l]);
+        fr[l] = Some(FilmRay {
+            pin: glam::DVec3::new(pin_x[l], pin_y[l], pin_z[l]),
+            d,
+            weight: weight[l],
+        });
+        if d.z > 0.0 && passed[l] {
+            rays[l] = Some(InputRay {
+                r: ri[l],
+                s: si[l],
+                c: ci[l],
+                dx: rdx[l],
+                dy: rdy[l],
+            });
         }
     }
 }
