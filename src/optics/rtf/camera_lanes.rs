@@ -146,10 +146,10 @@ fn chunk(
         }
     };
     let w = &cam.rtf.waves[wi];
-    // The steps up to the input plane's rotated ray; the rays that pass the
-    // pass test, in order, with their samples' places.
+    // The steps up to the input plane's rotated ray; the places of the
+    // samples whose rays pass the pass test, in order.
     let mut fr: [Option<FilmRay>; CHUNK] = [None; CHUNK];
-    let mut pass: [(usize, Option<InputRay>); CHUNK] = [(0, None); CHUNK];
+    let mut pass = [0usize; CHUNK];
     let mut rays: [Option<InputRay>; CHUNK] = [None; CHUNK];
     let mut l0 = 0;
     while l0 < m {
@@ -168,15 +168,15 @@ fn chunk(
     for l in 0..m {
         out[l] = None;
         if rays[l].is_some() {
-            pass[np] = (l, rays[l]);
+            pass[np] = l;
             np += 1;
         }
     }
     // Their polynomials, `LANES` rays side by side, and their output rays.
     for group in pass[..np].chunks(LANES) {
         let (mut r, mut dx, mut dy) = ([0f64; LANES], [0f64; LANES], [0f64; LANES]);
-        for (k, (_, q)) in group.iter().enumerate() {
-            if let Some(q) = q {
+        for (k, &l) in group.iter().enumerate() {
+            if let Some(q) = &rays[l] {
                 (r[k], dx[k], dy[k]) = (q.r, q.dx, q.dy);
             }
         }
@@ -191,8 +191,8 @@ fn chunk(
             }
         }
         let v = fused.eval_lanes(&pr, &px, &py);
-        for (k, &(l, q)) in group.iter().enumerate() {
-            if let (Some(f), Some(q)) = (&fr[l], &q) {
+        for (k, &l) in group.iter().enumerate() {
+            if let (Some(f), Some(q)) = (&fr[l], &rays[l]) {
                 let vals = [0, 1, 2, 3, 4, 5].map(|o| w.outputs[o].as_ref().map(|_| v[o][k]));
                 out[l] = cam.camera_ray(f, cam.rtf.rotate_out(q, vals));
             }
