@@ -230,8 +230,11 @@ pub fn render_world_at(
 /// (returns 1).
 #[inline(always)]
 fn accumulate(acc: &mut [f64], l: &[f32], weight: f64) -> u64 {
-    // No early exit: a fold over every band vectorises.
-    if l.iter().fold(false, |bad, x| bad | !x.is_finite()) {
+    // No early exit: the largest magnitude's bits over every band (an
+    // integer maximum, which vectorises; `is_finite` per band did not):
+    // non-finite when at least the infinity's.
+    let top = l.iter().fold(0u32, |m, x| m.max(x.to_bits() & 0x7fff_ffff));
+    if top >= f32::INFINITY.to_bits() {
         return 1;
     }
     for (x, &l) in acc.iter_mut().zip(l) {
@@ -424,10 +427,12 @@ impl RunJob<'_> {
                 .enumerate()
                 .for_each(|(j, x)| *x = if j == b { nb as f32 } else { 0.0 }),
             // Padding bands (≥ nb) carry no throughput.
-            None => {
-                beta[..nb].fill(1.0);
-                beta[nb..].fill(0.0);
-            }
+            // Written band by band, not as two fills: a fill of run-time
+            // length is a call to `memset`.
+            None => beta
+                .iter_mut()
+                .enumerate()
+                .for_each(|(j, x)| *x = if j < nb { 1.0 } else { 0.0 }),
         }
     }
 
@@ -668,7 +673,7 @@ impl RunJob<'_> {
                         }
                         let (p, sc) = (&mut pk[pi], &mut scs[pi]);
                         let lane = (!p.alive & ALL_LANES).trailing_zeros() as usize;
-                        std::mem::swap(&mut p.smps[lane], &mut cam.smps[j]);
+                        p.smps[lane].clone_from(&cam.smps[j]);
                         self.init_beta(st.hero, sc.beta_mut(lane));
                         p.paths[lane] = st;
                         slot.weights[n] = Some(w);

@@ -165,6 +165,7 @@ impl BatchScramble {
 }
 
 /// The numbers of one pixel sample.
+#[derive(Clone)]
 pub struct Sampler {
     rng: Rng,
     /// Scrambled Sobol draws (draw d in lane d) of this sample.
