@@ -125,19 +125,18 @@ pub(super) fn roulette(st: &mut PathState, nb: usize, u_rr: f32, beta: &mut [f32
     if !(m > 0.0) {
         return false;
     }
-    if st.depth == 1 {
-        st.rr_ref = m.min(1.0);
-    }
+    // Written without branches on the draw or the depth (selects, and the
+    // throughput always scaled, by exactly 1 when the roulette is not
+    // played, which leaves every band's bits as they are): across a
+    // packet's lanes these outcomes are random, and as branches they were
+    // mispredicted about once a path.
+    st.rr_ref = if st.depth == 1 { m.min(1.0) } else { st.rr_ref };
     let m = m / st.rr_ref;
-    if m < 1.0 && st.depth > 1 {
-        let q = (1.0 - m).max(0.0);
-        if u_rr < q {
-            return false;
-        }
-        let s = 1.0 / (1.0 - q);
-        beta.iter_mut().for_each(|b| *b *= s);
-    }
-    true
+    let played = m < 1.0 && st.depth > 1;
+    let q = (1.0 - m).max(0.0);
+    let s = if played { 1.0 / (1.0 - q) } else { 1.0 };
+    beta.iter_mut().for_each(|b| *b *= s);
+    !(played && u_rr < q)
 }
 
 #[cfg(test)]
@@ -167,6 +166,71 @@ mod tests {
                 let got = max_band(&v);
                 assert_eq!(got, want, "{v:?}");
                 assert!(got >= 0.0 && got.is_sign_positive());
+            }
+        }
+    }
+
+    /// Russian roulette against its rule stated plainly (survive with
+    /// p = min(1, m/m₁) from the second bounce, m₁ set at the first, the
+    /// survivor scaled by 1/(1 − q), q = 1 − p): the same decision and the
+    /// same band bits for every draw, the throughput's bits untouched when
+    /// the roulette is not played; and over stratified draws the expected
+    /// throughput is the throughput (unbiased) within the strata's 1/N.
+    #[test]
+    fn roulette_follows_its_rule_and_is_unbiased() {
+        let n = 4000usize;
+        for depth in 1..=3u32 {
+            for rr_ref in [1.0f32, 0.38, 0.5] {
+                for top in [0.05f32, 0.3, 0.38, 0.9, 1.0, 1.7] {
+                    let beta0: Vec<f32> = (0..32)
+                        .map(|b| {
+                            if b < 31 {
+                                top * (0.2 + 0.8 * (b % 5) as f32 / 4.0)
+                            } else {
+                                0.0
+                            }
+                        })
+                        .collect();
+                    let mut mean = vec![0.0f64; 32];
+                    let mut survived = 0usize;
+                    for k in 0..n {
+                        let u = (k as f32 + 0.5) / n as f32;
+                        let mut st = PathState::camera(Vec3::ZERO, Vec3::Z, None);
+                        (st.depth, st.rr_ref) = (depth, rr_ref);
+                        let mut beta = beta0.clone();
+                        let lives = roulette(&mut st, 31, u, &mut beta);
+                        // The rule, plainly.
+                        let m = beta0.iter().fold(0.0f32, |a, &b| a.max(b));
+                        let m1 = if depth == 1 { m.min(1.0) } else { rr_ref };
+                        assert_eq!(st.rr_ref, m1);
+                        let p = m / m1;
+                        let played = p < 1.0 && depth > 1;
+                        let q = (1.0 - p).max(0.0);
+                        assert_eq!(
+                            lives,
+                            !(played && u < q),
+                            "depth {depth} m {m} m1 {m1} u {u}"
+                        );
+                        if !lives {
+                            continue;
+                        }
+                        survived += 1;
+                        for (b, (&got, &b0)) in beta.iter().zip(&beta0).enumerate() {
+                            let want = if played { b0 * (1.0 / (1.0 - q)) } else { b0 };
+                            assert_eq!(got.to_bits(), want.to_bits(), "band {b}");
+                            mean[b] += got as f64 / n as f64;
+                        }
+                    }
+                    assert!(survived > 0);
+                    let p = (top / if depth == 1 { top.min(1.0) } else { rr_ref }).min(1.0) as f64;
+                    for (b, (&mb, &b0)) in mean.iter().zip(&beta0).enumerate() {
+                        let tol = 2.0 / (n as f64 * p) * b0 as f64 + 1e-7;
+                        assert!(
+                            (mb - b0 as f64).abs() <= tol,
+                            "band {b}: E[beta] {mb} against {b0}"
+                        );
+                    }
+                }
             }
         }
     }
