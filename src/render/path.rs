@@ -130,7 +130,10 @@ pub(super) fn roulette(st: &mut PathState, nb: usize, u_rr: f32, beta: &mut [f32
     // played, which leaves every band's bits as they are): across a
     // packet's lanes these outcomes are random, and as branches they were
     // mispredicted about once a path.
-    st.rr_ref = if st.depth == 1 { m.min(1.0) } else { st.rr_ref };
+    // (The reference's choice as a bit mask: LLVM lowers a float select on
+    // an integer test to a branch.)
+    let first = 0u32.wrapping_sub((st.depth == 1) as u32);
+    st.rr_ref = f32::from_bits((m.min(1.0).to_bits() & first) | (st.rr_ref.to_bits() & !first));
     let m = m / st.rr_ref;
     let played = m < 1.0 && st.depth > 1;
     let q = (1.0 - m).max(0.0);
