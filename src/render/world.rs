@@ -517,12 +517,17 @@ impl World {
     #[inline(always)]
     pub(super) fn choose_light(&self, u: f32) -> (usize, f32, f32) {
         let idx = sample_cdf(&self.light_cdf, u);
-        // Selects, not branches: which light a draw picks is random.
-        let below = self.light_cdf[idx.saturating_sub(1)];
-        let lo = if idx == 0 { 0.0 } else { below };
+        let lo = if idx == 0 {
+            0.0
+        } else {
+            self.light_cdf[idx - 1]
+        };
         let width = self.light_cdf[idx] - lo;
-        let rest = ((u - lo) / width).clamp(0.0, ONE_MINUS_EPSILON);
-        let u_rest = if width > 0.0 { rest } else { 0.0 };
+        let u_rest = if width > 0.0 {
+            ((u - lo) / width).clamp(0.0, ONE_MINUS_EPSILON)
+        } else {
+            0.0
+        };
         (idx, self.light_pmf[idx], u_rest)
     }
 
