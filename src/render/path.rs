@@ -197,6 +197,12 @@ mod tests {
                             }
                         })
                         .collect();
+                    // The rule, plainly: it does not depend on the draw.
+                    let m = beta0.iter().fold(0.0f32, |a, &b| a.max(b));
+                    let m1 = if depth == 1 { m.min(1.0) } else { rr_ref };
+                    let p = m / m1;
+                    let played = p < 1.0 && depth > 1;
+                    let q = (1.0 - p).max(0.0);
                     let mut mean = vec![0.0f64; 32];
                     let mut survived = 0usize;
                     for k in 0..n {
@@ -205,13 +211,7 @@ mod tests {
                         (st.depth, st.rr_ref) = (depth, rr_ref);
                         let mut beta = beta0.clone();
                         let lives = roulette(&mut st, 31, u, &mut beta);
-                        // The rule, plainly.
-                        let m = beta0.iter().fold(0.0f32, |a, &b| a.max(b));
-                        let m1 = if depth == 1 { m.min(1.0) } else { rr_ref };
                         assert_eq!(st.rr_ref, m1);
-                        let p = m / m1;
-                        let played = p < 1.0 && depth > 1;
-                        let q = (1.0 - p).max(0.0);
                         assert_eq!(
                             lives,
                             !(played && u < q),
@@ -228,7 +228,7 @@ mod tests {
                         }
                     }
                     assert!(survived > 0);
-                    let p = (top / if depth == 1 { top.min(1.0) } else { rr_ref }).min(1.0) as f64;
+                    let p = p.min(1.0) as f64;
                     for (b, (&mb, &b0)) in mean.iter().zip(&beta0).enumerate() {
                         let tol = 2.0 / (n as f64 * p) * b0 as f64 + 1e-7;
                         assert!(
