@@ -11,12 +11,17 @@
 //! depend on one another, instead of one long per-pixel chain: the CPU overlaps many
 //! pixels, and the Poisson draws whose first PTRS proposal is rejected (an
 //! unpredictable branch: 1 − 0.86·v_r of them, 65 % at μ = 10, 33 % at 100, 24 % at
-//! 1000, 22 % at 6000) are finished in a separate loop. Each pixel sees
+//! 1000, 22 % at 6000) are finished in separate loops: gathered, then side by
+//! side by [`ptrs_after_first_all`] (PTRS's full test without libm, exact to the
+//! bit, and a second proposal), the few it leaves by the exact path. Each pixel sees
 //! exactly the operations, in the same order, of a pixel-by-pixel evaluation, so
 //! the split changes no value.
 
 use super::config::SensorConfig;
-use super::rng::{PixelRng, fast_round, ptrs_constants, stream, uniform_from_bits, ziggurat_x};
+use super::rng::{
+    PixelRng, fast_round, ln_factorial_table, ptrs_after_first_all, ptrs_constants, stream,
+    uniform_from_bits, ziggurat_x,
+};
 use crate::optical_image::Rect;
 
 /// PRNU gain and DSNU offset (volts) of full-frame pixel index `gi`, as drawn
@@ -168,6 +173,12 @@ pub struct Scratch {
     v: Vec<f64>,
     /// Per pixel: the vectorised first pass was enough.
     ok: Vec<bool>,
+    /// The pixels whose first PTRS proposal failed the fast test (column
+    /// indices), their means, and what `ptrs_after_first` made of them.
+    slow: Vec<u32>,
+    slow_mu: Vec<f64>,
+    slow_k: Vec<f64>,
+    slow_done: Vec<bool>,
 }
 
 impl Scratch {
@@ -304,11 +315,7 @@ impl Readout {
                     & (us >= 0.07)
                     & (v * bm2 <= v_r_num);
             }
-            for (c, ((e, &ok), &m)) in s.e.iter_mut().zip(&s.ok).zip(mean).enumerate() {
-                if !ok {
-                    *e = PixelRng::keyed(kp, gi0 + c as u64).poisson(m as f64);
-                }
-            }
+            self.finish_slow_photons(gi0, mean, s);
         } else {
             for (e, &m) in s.e.iter_mut().zip(mean) {
                 *e = m as f64;
@@ -422,6 +429,47 @@ impl Readout {
             for (o, &v) in vr.iter_mut().zip(v.iter()) {
                 *o = v as f32;
             }
+        }
+    }
+
+    /// The photon counts whose first PTRS proposal failed the fast test: gathered,
+    /// finished side by side by [`ptrs_after_first_all`] where it can (the same
+    /// values as the exact path), the others by the exact path.
+    #[inline(always)]
+    fn finish_slow_photons(&self, gi0: u64, mean: &[f32], s: &mut Scratch) {
+        let kp = self.k_photon;
+        s.slow.clear();
+        s.slow_mu.clear();
+        for (c, (&ok, &m)) in s.ok.iter().zip(mean).enumerate() {
+            if !ok {
+                s.slow.push(c as u32);
+                s.slow_mu.push(m as f64);
+            }
+        }
+        s.slow_k.clear();
+        s.slow_k.resize(s.slow.len(), 0.0);
+        s.slow_done.clear();
+        s.slow_done.resize(s.slow.len(), false);
+        ptrs_after_first_all(
+            ln_factorial_table(),
+            kp,
+            gi0,
+            &s.slow,
+            &s.slow_mu,
+            &mut s.slow_k,
+            &mut s.slow_done,
+        );
+        for ((&c, &mu), (&k, &done)) in s
+            .slow
+            .iter()
+            .zip(&s.slow_mu)
+            .zip(s.slow_k.iter().zip(&s.slow_done))
+        {
+            s.e[c as usize] = if done {
+                k
+            } else {
+                PixelRng::keyed(kp, gi0 + c as u64).poisson(mu)
+            };
         }
     }
 

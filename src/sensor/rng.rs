@@ -10,6 +10,9 @@
 
 use std::sync::OnceLock;
 
+mod ptrs_squeeze;
+pub use ptrs_squeeze::{ln_near, ptrs_after_first, ptrs_after_first_all};
+
 /// Stream identifiers (one per noise source) so sources never share numbers.
 pub mod stream {
     pub const PHOTON: u64 = 0x1;
@@ -329,17 +332,23 @@ pub fn fast_round(x: f64) -> f64 {
     }
 }
 
-/// ln(k!) for integer-valued k ≥ 0: exact table below 256, Stirling series above
-/// (truncation error < 1e-16 relative there).
-pub fn ln_factorial(k: f64) -> f64 {
-    static TABLE: OnceLock<Vec<f64>> = OnceLock::new();
-    let t = TABLE.get_or_init(|| {
-        let mut v = vec![0.0f64; 256];
+/// ln k! for k = 0…255, each the sum of the logarithms up to k in order (what
+/// [`ln_factorial`] returns below 256).
+pub fn ln_factorial_table() -> &'static [f64; 256] {
+    static TABLE: OnceLock<[f64; 256]> = OnceLock::new();
+    TABLE.get_or_init(|| {
+        let mut v = [0.0f64; 256];
         for i in 1..256 {
             v[i] = v[i - 1] + (i as f64).ln();
         }
         v
-    });
+    })
+}
+
+/// ln(k!) for integer-valued k ≥ 0: exact table below 256, Stirling series above
+/// (truncation error < 1e-16 relative there).
+pub fn ln_factorial(k: f64) -> f64 {
+    let t = ln_factorial_table();
     if k < 256.0 {
         return t[k.max(0.0) as usize];
     }

@@ -1,0 +1,240 @@
+//! PTRS's rejected first proposals finished without libm (issue 17 item 5).
+//!
+//! About a fifth of the Poisson draws at μ ≥ 10 fail PTRS's fast acceptance
+//! (22 % at μ = 6000), and the full acceptance test of
+//! [`PixelRng::poisson`](super::PixelRng::poisson) then takes three libm
+//! logarithms per draw (ln μ, the proposal's log-density, and ln n in the
+//! Stirling series of ln k!) behind a branch on random data: a quarter of the
+//! sensor stage's time in `camsim bench sensor`.
+//!
+//! [`ptrs_after_first`] takes those draws without a libm call: it evaluates the
+//! same test with [`ln_near`], a branch-free logarithm within 10⁻¹⁵·max(1, |ln x|)
+//! of libm's (tested below over every binade of the normal range), and decides
+//! only when the two sides differ by more than a margin δ that bounds, with a
+//! factor of at least ten to spare, what the two logarithms and the roundings
+//! of the expressions built on them can move either side. A decided draw is
+//! therefore the one [`PixelRng::poisson`](super::PixelRng::poisson) returns,
+//! bit for bit: the squeeze changes no value, only which code computes it.
+//! When the first proposal is rejected it also takes the second proposal if
+//! that passes the fast test; everything else (a margin within δ, a third
+//! proposal, a proposal beyond ±2⁵², a log-density of 0) is left to the exact
+//! path: 11 % of the draws that failed the fast test at μ = 6000, 25 % at μ = 10.
+
+use super::{GAMMA, mix64, ptrs_constants, uniform_from_bits};
+
+/// 2⁵²: below it, f64 truncation toward zero is exact.
+const TWO52: f64 = 4_503_599_627_370_496.0;
+
+/// ln x for positive normal finite x, within 10⁻¹⁵·max(1, |ln x|) of libm's
+/// (`ln_near_tracks_libm_over_every_binade`); NaN for any other x. Branch-free
+/// (x = 2ᵉ·m with m in [√½, √2), ln m = 2·atanh(s), s = (m − 1)/(m + 1),
+/// |s| ≤ 0.1716, by its odd series to s²³), so a loop of these vectorises.
+#[inline(always)]
+pub fn ln_near(x: f64) -> f64 {
+    let bits = x.to_bits();
+    let valid = (f64::MIN_POSITIVE..f64::INFINITY).contains(&x);
+    let m1 = f64::from_bits((bits & 0x000f_ffff_ffff_ffff) | 0x3ff0_0000_0000_0000);
+    let big = m1 > std::f64::consts::SQRT_2;
+    let m = if big { 0.5 * m1 } else { m1 };
+    let e = ((bits >> 52) & 0x7ff) as i64 - 1023 + i64::from(big);
+    let f = m - 1.0;
+    let s = f / (2.0 + f);
+    let z = s * s;
+    // 2·atanh(s) = 2s·Σ z^j/(2j+1); z ≤ 0.0295, so z¹² ≤ 4·10⁻¹⁹ ends the series.
+    let mut p = 1.0 / 23.0;
+    for j in (0..11).rev() {
+        p = p * z + 1.0 / (2 * j + 1) as f64;
+    }
+    let ln_m = 2.0 * s * p;
+    let r = e as f64 * std::f64::consts::LN_2 + ln_m;
+    if valid { r } else { f64::NAN }
+}
+
+/// ln k! as [`ln_factorial`](super::ln_factorial) computes it, with [`ln_near`]
+/// in place of libm's logarithm in the Stirling series (k ≥ 256); below 256 the
+/// same `table` ([`ln_factorial_table`](super::ln_factorial_table)).
+#[inline(always)]
+fn ln_factorial_near(table: &[f64; 256], k: f64) -> f64 {
+    let n = k + 1.0;
+    let inv = 1.0 / n;
+    let inv2 = inv * inv;
+    let stirling = (n - 0.5) * ln_near(n) - n
+        + 0.5 * std::f64::consts::TAU.ln()
+        + inv * (1.0 / 12.0 - inv2 * (1.0 / 360.0 - inv2 * (1.0 / 1260.0 - inv2 / 1680.0)));
+    // Both read, one kept: a loop of these has no branch to vectorise around.
+    let tabled = table[usize::from(k.clamp(0.0, 255.0) as u8)];
+    if k < 256.0 { tabled } else { stirling }
+}
+
+/// One proposal of PTRS from outputs `n` and `n + 1` of the stream: (k, us, v,
+/// passes the fast test, |x| < 2⁵² so k is exact).
+#[inline(always)]
+fn proposal(start: u64, n: u64, mu: f64, a: f64, b: f64, bm2: f64, v_r: f64) -> [f64; 5] {
+    let out = |i: u64| uniform_from_bits(mix64(start.wrapping_add(GAMMA.wrapping_mul(i))));
+    let u = out(n) - 0.5;
+    let v = out(n + 1);
+    let us = 0.5 - u.abs();
+    let x = (2.0 * a / us + b) * u + mu + 0.43;
+    let t = x as i64 as f64;
+    let k = t - f64::from(u8::from(t > x));
+    let fast = (us >= 0.07) & (v * bm2 <= v_r);
+    [
+        k,
+        us,
+        v,
+        f64::from(u8::from(fast)),
+        f64::from(u8::from(x.abs() < TWO52)),
+    ]
+}
+
+/// The Poisson draw of mean `mu` (10 ≤ μ < ∞) on the stream of (`stream_key`,
+/// `item`), as `PixelRng::keyed(stream_key, item).poisson(mu)` returns it, when
+/// PTRS accepts its first proposal or, that rejected, its second by the fast
+/// test: (k, true). (·, false) when the draw needs the exact path. `table` is
+/// [`ln_factorial_table`](super::ln_factorial_table). Branch-free, so a loop of
+/// these vectorises.
+#[inline(always)]
+pub fn ptrs_after_first(table: &[f64; 256], stream_key: u64, item: u64, mu: f64) -> (f64, bool) {
+    let start = mix64(stream_key ^ item.wrapping_mul(0xd1b5_4a32_d192_ed03));
+    let (a, b, bm2, v_r) = ptrs_constants(mu);
+    let [k, us, v, fast, exact] = proposal(start, 1, mu, a, b, bm2, v_r);
+    let (fast, exact) = (fast != 0.0, exact != 0.0);
+    // The full test of the first proposal, as `poisson_ptrs_slow` writes it.
+    let skip = (k < 0.0) | ((us < 0.013) & (v > us));
+    let log_mu = ln_near(mu);
+    let inv_alpha = 1.1239 + 1.1328 / (b - 3.4);
+    let lhs = ln_near(v * inv_alpha / (a / (us * us) + b));
+    let lf = ln_factorial_near(table, k);
+    let k_log_mu = k * log_mu;
+    let rhs = -mu + k_log_mu - lf;
+    // What separates these sides from the exact path's: its logarithms and
+    // `ln_near`'s differ by at most 1.3·10⁻¹⁵·max(1, |ln|) (libm's error ≤ 1 ulp,
+    // `ln_near`'s ≤ 10⁻¹⁵ as tested), which k·ln μ and (n − ½)·ln n ≈ |ln k!| + n
+    // scale by k and n, and the roundings of the operations after them add at most
+    // 2⁻⁵³ of the largest term each: in all ≤ 2.3·10⁻¹⁵ of `scale`. δ is 40× that.
+    let scale = mu + 2.0 * k.abs() * log_mu.abs().max(1.0) + lf.abs() + k.abs() + lhs.abs() + 2.0;
+    let delta = 1e-13 * scale;
+    let accept1 = !skip & (lhs + delta < rhs);
+    let reject1 = skip | (lhs > rhs + delta);
+    let [k2, _, _, fast2, exact2] = proposal(start, 3, mu, a, b, bm2, v_r);
+    let take2 = reject1 & (fast2 != 0.0) & (exact2 != 0.0);
+    let done = exact & (fast | accept1 | take2);
+    (if fast | accept1 { k } else { k2 }, done)
+}
+
+/// [`ptrs_after_first`] for the pixels `cols` (offsets from full-frame index
+/// `item0`) with means `mus`: `k[j]`, `done[j]` for `cols[j]`. The lanes are
+/// computed 16 at a time into local arrays, which the compiler can prove apart
+/// from the ln k! table it gathers from, so the loop vectorises.
+#[inline(always)]
+pub fn ptrs_after_first_all(
+    table: &[f64; 256],
+    stream_key: u64,
+    item0: u64,
+    cols: &[u32],
+    mus: &[f64],
+    k: &mut [f64],
+    done: &mut [bool],
+) {
+    const W: usize = 16;
+    for (((cols, mus), k), done) in cols
+        .chunks(W)
+        .zip(mus.chunks(W))
+        .zip(k.chunks_mut(W))
+        .zip(done.chunks_mut(W))
+    {
+        let (mut kk, mut dd) = ([0f64; W], [false; W]);
+        let (mut cc, mut mm) = ([0u64; W], [10f64; W]);
+        for (j, (&c, &m)) in cols.iter().zip(mus).enumerate() {
+            (cc[j], mm[j]) = (u64::from(c), m);
+        }
+        for j in 0..W {
+            let (kj, dj) = ptrs_after_first(table, stream_key, item0 + cc[j], mm[j]);
+            (kk[j], dd[j]) = (kj, dj & (10.0..f64::INFINITY).contains(&mm[j]));
+        }
+        let n = cols.len();
+        k.copy_from_slice(&kk[..n]);
+        done.copy_from_slice(&dd[..n]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::PixelRng;
+    use super::*;
+
+    /// Within 10⁻¹⁵·max(1, |ln x|) of libm over every binade of the normal
+    /// range (100 points each, both ends included) and densely around 1, where
+    /// ln x → 0; NaN outside the normal range.
+    #[test]
+    fn ln_near_tracks_libm_over_every_binade() {
+        let mut worst = 0.0f64;
+        let mut check = |x: f64| {
+            let (got, want) = (ln_near(x), x.ln());
+            let err = (got - want).abs() / want.abs().max(1.0);
+            worst = worst.max(err);
+            assert!(err <= 1e-15, "ln({x:e}): {got:e} against libm {want:e}");
+        };
+        let mut r = PixelRng::new(5, 9, 0);
+        for e in -1022..=1023i32 {
+            let base = 2f64.powi(e);
+            check(base);
+            check(f64::from_bits(base.to_bits() | 0x000f_ffff_ffff_ffff));
+            for _ in 0..100 {
+                check(base * (1.0 + r.uniform()));
+            }
+        }
+        for i in 0..200_000 {
+            check(1.0 + (i as f64 - 100_000.0) * 1e-6);
+            check(1.0 + (r.uniform() - 0.5) * 1e-12);
+        }
+        for x in [
+            std::f64::consts::SQRT_2,
+            std::f64::consts::FRAC_1_SQRT_2,
+            f64::MAX,
+        ] {
+            check(x);
+            check(f64::from_bits(x.to_bits() - 1));
+        }
+        assert!(worst > 0.0, "ln_near is libm's own function?");
+        for x in [0.0, -1.0, f64::MIN_POSITIVE / 2.0, f64::INFINITY, f64::NAN] {
+            assert!(ln_near(x).is_nan(), "ln_near({x:e}) should be NaN");
+        }
+    }
+
+    /// Every decided draw is the exact path's, bit for bit, over 4·10⁵ streams
+    /// at means from PTRS's threshold to 10⁹; the squeeze decides the fast-test
+    /// failures it should (the first proposal's full test and a second
+    /// proposal that passes the fast test: 75 % of them at μ = 10, 85–89 %
+    /// from μ = 137.5 on), and every fast-accepted draw.
+    #[test]
+    fn decided_draws_are_the_exact_draws() {
+        let key = PixelRng::stream_key(77, 1);
+        for &mu in &[
+            10.0, 10.5, 17.25, 137.5, 1000.0, 6000.0, 1.0e5, 3.3e7, 1.0e9,
+        ] {
+            let (mut slow, mut decided) = (0usize, 0usize);
+            for item in 0..400_000u64 {
+                let want = PixelRng::keyed(key, item).poisson(mu);
+                let (got, done) =
+                    ptrs_after_first(super::super::ln_factorial_table(), key, item, mu);
+                let first = PixelRng::keyed(key, item).poisson_ptrs_first(mu);
+                if done {
+                    assert_eq!(got.to_bits(), want.to_bits(), "μ {mu}, item {item}");
+                }
+                if first.accepted {
+                    assert!(done, "μ {mu}, item {item}: a fast-accepted draw");
+                } else {
+                    slow += 1;
+                    decided += usize::from(done);
+                }
+            }
+            let frac = decided as f64 / slow as f64;
+            let want_frac = if mu < 20.0 { 0.74 } else { 0.84 };
+            assert!(
+                frac > want_frac,
+                "μ {mu}: decided {decided} of {slow} slow draws"
+            );
+        }
+    }
+}
