@@ -653,24 +653,31 @@ fn edge_contrast(esf: &[f64]) -> f64 {
 /// E|N|² = Σ_j |a_j|² σ_j²/n_j.
 fn noise_floor(win: &[f64], cnt: &[u32], var_j: &[f64], dc: f64, nfreq: usize) -> Vec<f64> {
     let n = win.len();
+    // (sin, cos) of ω·k for k = 0…n−1: each term j − 1 and j + 1 takes its
+    // angle from here (the same product ω·k, so the same values as computing it
+    // per term, with half the trigonometric calls).
+    let mut sc = vec![(0.0f64, 0.0f64); n];
     (0..nfreq)
         .map(|m| {
             if m == 0 || dc <= 0.0 {
                 return 0.0;
             }
             let w = 2.0 * std::f64::consts::PI * m as f64 / n as f64;
+            for (k, t) in sc.iter_mut().enumerate() {
+                *t = (w * k as f64).sin_cos();
+            }
             let mut var = 0.0;
             for j in 0..n {
                 let (mut re, mut im) = (0.0, 0.0);
                 if j >= 2 && j - 1 < n - 1 {
-                    let a = w * (j - 1) as f64;
-                    re += win[j - 1] * a.cos();
-                    im -= win[j - 1] * a.sin();
+                    let (sin, cos) = sc[j - 1];
+                    re += win[j - 1] * cos;
+                    im -= win[j - 1] * sin;
                 }
                 if j + 1 < n - 1 {
-                    let a = w * (j + 1) as f64;
-                    re -= win[j + 1] * a.cos();
-                    im += win[j + 1] * a.sin();
+                    let (sin, cos) = sc[j + 1];
+                    re -= win[j + 1] * cos;
+                    im += win[j + 1] * sin;
                 }
                 var += 4.0 * (re * re + im * im) * var_j[j] / cnt[j].max(1) as f64;
             }
