@@ -108,10 +108,11 @@ pub fn ptrs_after_first(table: &[f64; 256], stream_key: u64, item: u64, mu: f64)
     let k_log_mu = k * log_mu;
     let rhs = -mu + k_log_mu - lf;
     // What separates these sides from the exact path's: its logarithms and
-    // `ln_near`'s differ by at most 1.3·10⁻¹⁵·max(1, |ln|) (libm's error ≤ 1 ulp,
-    // `ln_near`'s ≤ 10⁻¹⁵ as tested), which k·ln μ and (n − ½)·ln n ≈ |ln k!| + n
-    // scale by k and n, and the roundings of the operations after them add at most
-    // 2⁻⁵³ of the largest term each: in all ≤ 2.3·10⁻¹⁵ of `scale`. δ is 40× that.
+    // `ln_near`'s differ by at most 10⁻¹⁵·max(1, |ln|) (as tested), which moves
+    // lhs by ≤ 10⁻¹⁵·(|lhs| + 1), k·ln μ by ≤ ½·10⁻¹⁵ of its `scale` term and
+    // (n − ½)·ln n (n·ln n ≈ |ln k!| + n) by ≤ 10⁻¹⁵·(|ln k!| + k + 1); the seven
+    // roundings after the logarithms differ by at most 2·2⁻⁵³ of `scale` each.
+    // In all ≤ 4·10⁻¹⁵ of `scale`; δ is 25× that.
     let scale = mu + 2.0 * k.abs() * log_mu.abs().max(1.0) + lf.abs() + k.abs() + lhs.abs() + 2.0;
     let delta = 1e-13 * scale;
     let accept1 = !skip & (lhs + delta < rhs);
