@@ -438,14 +438,19 @@ impl Readout {
     #[inline(always)]
     fn finish_slow_photons(&self, gi0: u64, mean: &[f32], s: &mut Scratch) {
         let kp = self.k_photon;
-        s.slow.clear();
-        s.slow_mu.clear();
+        // Gathered without a branch (a fifth of the pixels, at random): every
+        // pixel is written at the next free place, which moves on past the slow ones.
+        let n = mean.len();
+        s.slow.resize(n + 1, 0);
+        s.slow_mu.resize(n + 1, 0.0);
+        let mut m_slow = 0;
         for (c, (&ok, &m)) in s.ok.iter().zip(mean).enumerate() {
-            if !ok {
-                s.slow.push(c as u32);
-                s.slow_mu.push(m as f64);
-            }
+            s.slow[m_slow] = c as u32;
+            s.slow_mu[m_slow] = m as f64;
+            m_slow += usize::from(!ok);
         }
+        s.slow.truncate(m_slow);
+        s.slow_mu.truncate(m_slow);
         s.slow_k.clear();
         s.slow_k.resize(s.slow.len(), 0.0);
         s.slow_done.clear();
