@@ -19,8 +19,8 @@
 
 use super::config::SensorConfig;
 use super::rng::{
-    PixelRng, fast_round, ln_factorial_table, ptrs_after_first_all, ptrs_constants, stream,
-    uniform_from_bits, ziggurat_x,
+    LaneProposal, PixelRng, fast_round, ln_factorial_table, ptrs_after_first_all, ptrs_constants,
+    stream, ziggurat_x,
 };
 use crate::optical_image::Rect;
 
@@ -295,25 +295,15 @@ impl Readout {
         s.fit(n);
         let gi0 = (self.window.y as u64 + r as u64) * self.full_w + self.window.x as u64;
         let zx = ziggurat_x();
-        const TWO52: f64 = 4_503_599_627_370_496.0;
         // Photon counts: PTRS's first proposal where μ ≥ 10; everything else (small or
         // non-finite means, rejected proposals) drawn in full after.
         if self.photon_noise {
             let kp = self.k_photon;
             for (c, ((e, ok), &m)) in s.e.iter_mut().zip(s.ok.iter_mut()).zip(mean).enumerate() {
                 let mu = m as f64;
-                let gi = gi0 + c as u64;
-                let (a, b, bm2, v_r_num) = ptrs_constants(mu);
-                let u = uniform_from_bits(PixelRng::keyed_output(kp, gi, 1)) - 0.5;
-                let v = uniform_from_bits(PixelRng::keyed_output(kp, gi, 2));
-                let us = 0.5 - u.abs();
-                let x = (2.0 * a / us + b) * u + mu + 0.43;
-                let t = x as i64 as f64;
-                *e = t - f64::from(u8::from(t > x));
-                *ok = (10.0..f64::INFINITY).contains(&mu)
-                    & (x.abs() < TWO52)
-                    & (us >= 0.07)
-                    & (v * bm2 <= v_r_num);
+                let p = LaneProposal::new(kp, gi0 + c as u64, 1, mu, ptrs_constants(mu));
+                *e = p.k;
+                *ok = (10.0..f64::INFINITY).contains(&mu) & p.exact & p.fast;
             }
             self.finish_slow_photons(gi0, mean, s);
         } else {

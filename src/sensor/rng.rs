@@ -11,7 +11,7 @@
 use std::sync::OnceLock;
 
 mod ptrs_squeeze;
-pub use ptrs_squeeze::{ln_near, ptrs_after_first, ptrs_after_first_all};
+pub use ptrs_squeeze::{LaneProposal, ln_near, ptrs_after_first, ptrs_after_first_all};
 
 /// Stream identifiers (one per noise source) so sources never share numbers.
 pub mod stream {
@@ -59,6 +59,18 @@ pub struct PixelRng {
 
 const GAMMA: u64 = 0x9e37_79b9_7f4a_7c15;
 
+/// The starting state of the stream of (`stream_key`, `item`).
+#[inline(always)]
+fn stream_start(stream_key: u64, item: u64) -> u64 {
+    mix64(stream_key ^ item.wrapping_mul(0xd1b5_4a32_d192_ed03))
+}
+
+/// Output `n` (n ≥ 1) of the stream that starts at `start`.
+#[inline(always)]
+fn output_at(start: u64, n: u64) -> u64 {
+    mix64(start.wrapping_add(GAMMA.wrapping_mul(n)))
+}
+
 impl PixelRng {
     /// The stream for `item` (e.g. full-frame pixel index) of `source` under `seed`.
     #[inline]
@@ -74,7 +86,7 @@ impl PixelRng {
     #[inline]
     pub fn keyed(stream_key: u64, item: u64) -> Self {
         Self {
-            state: mix64(stream_key ^ item.wrapping_mul(0xd1b5_4a32_d192_ed03)),
+            state: stream_start(stream_key, item),
         }
     }
     /// The `n`-th output (n ≥ 1) of `keyed(stream_key, item)`, computed directly
@@ -82,8 +94,7 @@ impl PixelRng {
     /// `next_u64` returns. Lets a loop over pixels draw without a per-pixel state.
     #[inline(always)]
     pub fn keyed_output(stream_key: u64, item: u64, n: u64) -> u64 {
-        let start = mix64(stream_key ^ item.wrapping_mul(0xd1b5_4a32_d192_ed03));
-        mix64(start.wrapping_add(GAMMA.wrapping_mul(n)))
+        output_at(stream_start(stream_key, item), n)
     }
     #[inline]
     pub fn next_u64(&mut self) -> u64 {
@@ -353,9 +364,17 @@ pub fn ln_factorial(k: f64) -> f64 {
         return t[k.max(0.0) as usize];
     }
     let n = k + 1.0; // ln Γ(n)
+    ln_gamma_stirling(n, n.ln())
+}
+
+/// ln Γ(n) by the Stirling series, given `ln_n` = ln n (libm's in
+/// [`ln_factorial`], `ln_near`'s in the squeeze): one expression for both, so
+/// they differ by the logarithm alone.
+#[inline(always)]
+fn ln_gamma_stirling(n: f64, ln_n: f64) -> f64 {
     let inv = 1.0 / n;
     let inv2 = inv * inv;
-    (n - 0.5) * n.ln() - n
+    (n - 0.5) * ln_n - n
         + 0.5 * std::f64::consts::TAU.ln()
         + inv * (1.0 / 12.0 - inv2 * (1.0 / 360.0 - inv2 * (1.0 / 1260.0 - inv2 / 1680.0)))
 }

@@ -20,7 +20,7 @@
 //! proposal, a proposal beyond ±2⁵², a log-density of 0) is left to the exact
 //! path: 11 % of the draws that failed the fast test at μ = 6000, 25 % at μ = 10.
 
-use super::{GAMMA, mix64, ptrs_constants, uniform_from_bits};
+use super::{ln_gamma_stirling, output_at, ptrs_constants, stream_start, uniform_from_bits};
 
 /// 2⁵²: below it, f64 truncation toward zero is exact.
 const TWO52: f64 = 4_503_599_627_370_496.0;
@@ -56,35 +56,51 @@ pub fn ln_near(x: f64) -> f64 {
 #[inline(always)]
 fn ln_factorial_near(table: &[f64; 256], k: f64) -> f64 {
     let n = k + 1.0;
-    let inv = 1.0 / n;
-    let inv2 = inv * inv;
-    let stirling = (n - 0.5) * ln_near(n) - n
-        + 0.5 * std::f64::consts::TAU.ln()
-        + inv * (1.0 / 12.0 - inv2 * (1.0 / 360.0 - inv2 * (1.0 / 1260.0 - inv2 / 1680.0)));
+    let stirling = ln_gamma_stirling(n, ln_near(n));
     // Both read, one kept: a loop of these has no branch to vectorise around.
     let tabled = table[usize::from(k.clamp(0.0, 255.0) as u8)];
     if k < 256.0 { tabled } else { stirling }
 }
 
-/// One proposal of PTRS from outputs `n` and `n + 1` of the stream: (k, us, v,
-/// passes the fast test, |x| < 2⁵² so k is exact).
-#[inline(always)]
-fn proposal(start: u64, n: u64, mu: f64, a: f64, b: f64, bm2: f64, v_r: f64) -> [f64; 5] {
-    let out = |i: u64| uniform_from_bits(mix64(start.wrapping_add(GAMMA.wrapping_mul(i))));
-    let u = out(n) - 0.5;
-    let v = out(n + 1);
-    let us = 0.5 - u.abs();
-    let x = (2.0 * a / us + b) * u + mu + 0.43;
-    let t = x as i64 as f64;
-    let k = t - f64::from(u8::from(t > x));
-    let fast = (us >= 0.07) & (v * bm2 <= v_r);
-    [
-        k,
-        us,
-        v,
-        f64::from(u8::from(fast)),
-        f64::from(u8::from(x.abs() < TWO52)),
-    ]
+/// One PTRS proposal from outputs `n` and `n + 1` of a stream, branch-free (so
+/// a loop of these vectorises): what `PixelRng::poisson_ptrs_first` computes
+/// from those outputs, its floor exact while `exact`. The readout's first pass
+/// and [`ptrs_after_first`] both take their proposals from here.
+#[derive(Clone, Copy)]
+pub struct LaneProposal {
+    /// The proposed count, ⌊x⌋.
+    pub k: f64,
+    us: f64,
+    v: f64,
+    /// PTRS's fast acceptance test passed: `k` is the draw.
+    pub fast: bool,
+    /// |x| < 2⁵², where truncation toward zero (the floor's first step) is exact.
+    pub exact: bool,
+}
+
+impl LaneProposal {
+    /// The proposal from outputs `n`, `n + 1` of the stream of (`stream_key`,
+    /// `item`), for mean `mu` with `consts` = [`ptrs_constants`]`(mu)`.
+    #[inline(always)]
+    pub fn new(stream_key: u64, item: u64, n: u64, mu: f64, consts: (f64, f64, f64, f64)) -> Self {
+        Self::from_start(stream_start(stream_key, item), n, mu, consts)
+    }
+
+    #[inline(always)]
+    fn from_start(start: u64, n: u64, mu: f64, (a, b, bm2, v_r): (f64, f64, f64, f64)) -> Self {
+        let u = uniform_from_bits(output_at(start, n)) - 0.5;
+        let v = uniform_from_bits(output_at(start, n + 1));
+        let us = 0.5 - u.abs();
+        let x = (2.0 * a / us + b) * u + mu + 0.43;
+        let t = x as i64 as f64;
+        LaneProposal {
+            k: t - f64::from(u8::from(t > x)),
+            us,
+            v,
+            fast: (us >= 0.07) & (v * bm2 <= v_r),
+            exact: x.abs() < TWO52,
+        }
+    }
 }
 
 /// The Poisson draw of mean `mu` (10 ≤ μ < ∞) on the stream of (`stream_key`,
@@ -95,10 +111,16 @@ fn proposal(start: u64, n: u64, mu: f64, a: f64, b: f64, bm2: f64, v_r: f64) -> 
 /// these vectorises.
 #[inline(always)]
 pub fn ptrs_after_first(table: &[f64; 256], stream_key: u64, item: u64, mu: f64) -> (f64, bool) {
-    let start = mix64(stream_key ^ item.wrapping_mul(0xd1b5_4a32_d192_ed03));
-    let (a, b, bm2, v_r) = ptrs_constants(mu);
-    let [k, us, v, fast, exact] = proposal(start, 1, mu, a, b, bm2, v_r);
-    let (fast, exact) = (fast != 0.0, exact != 0.0);
+    let start = stream_start(stream_key, item);
+    let consts = ptrs_constants(mu);
+    let (a, b, _, _) = consts;
+    let LaneProposal {
+        k,
+        us,
+        v,
+        fast,
+        exact,
+    } = LaneProposal::from_start(start, 1, mu, consts);
     // The full test of the first proposal, as `poisson_ptrs_slow` writes it.
     let skip = (k < 0.0) | ((us < 0.013) & (v > us));
     let log_mu = ln_near(mu);
@@ -117,10 +139,10 @@ pub fn ptrs_after_first(table: &[f64; 256], stream_key: u64, item: u64, mu: f64)
     let delta = 1e-13 * scale;
     let accept1 = !skip & (lhs + delta < rhs);
     let reject1 = skip | (lhs > rhs + delta);
-    let [k2, _, _, fast2, exact2] = proposal(start, 3, mu, a, b, bm2, v_r);
-    let take2 = reject1 & (fast2 != 0.0) & (exact2 != 0.0);
+    let second = LaneProposal::from_start(start, 3, mu, consts);
+    let take2 = reject1 & second.fast & second.exact;
     let done = exact & (fast | accept1 | take2);
-    (if fast | accept1 { k } else { k2 }, done)
+    (if fast | accept1 { k } else { second.k }, done)
 }
 
 /// [`ptrs_after_first`] for the pixels `cols` (offsets from full-frame index
