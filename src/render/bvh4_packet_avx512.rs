@@ -8,7 +8,7 @@
 //! arrays of the traversal stack; on the 2-core EPYC (Zen 4) one packet test of
 //! the Cornell box's 36 triangles against 16 rays ran 60 ns per ray with
 //! intrinsics against 118 ns with the lane arrays, and the packet BVH
-//! traversal itself 88 ns per ray (README, *Performance by machine*).
+//! traversal itself 88 ns per ray (docs/performance.md).
 //!
 //! Same bits: lane by lane the same IEEE operations in the same order as
 //! `bvh4_packet.rs` (hence as the single-ray `bvh4.rs`): `_mm512_min_ps` /

@@ -252,7 +252,7 @@ fn accumulate(acc: &mut [f64], l: &[f32], weight: f64) -> u64 {
 /// ignored with a warning); by default packets at AVX2 and AVX-512, where
 /// they measured faster on the bench's Cornell box (AVX-512 ≈ 35 %, AVX2
 /// ≈ 21 % more paths/s), one by one at SSE, where the packet traversal is
-/// slower (≈ 20 % fewer paths/s; README, *Performance by machine*).
+/// slower (≈ 20 % fewer paths/s; docs/performance.md).
 pub fn packets_enabled(isa: RenderIsa) -> bool {
     static P: std::sync::OnceLock<Option<bool>> = std::sync::OnceLock::new();
     let forced = *P.get_or_init(|| match std::env::var("CAMSIM_RENDER_PACKETS") {
@@ -275,7 +275,7 @@ pub fn packets_enabled(isa: RenderIsa) -> bool {
 /// per thread (≈ 9 KB a packet). On the bench's Cornell box (2026-11-28,
 /// AVX-512 EPYC, M paths/s, three rounds): 16 / 32 / 64 / 128 packets
 /// 3.63–3.80 / 3.86–3.90 / 3.84–3.89 / 3.72–3.79, one packet as before
-/// 3.74–3.80 (README, *Performance by machine*).
+/// 3.74–3.80 (docs/performance.md).
 pub fn packets_in_flight() -> usize {
     static P: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
     *P.get_or_init(|| match std::env::var("CAMSIM_PACKETS_IN_FLIGHT") {

@@ -59,20 +59,21 @@
 //!   pixel is accumulated in sample order when its last path ends. At SSE,
 //!   or with `CAMSIM_RENDER_PACKETS=0`, each path is traced alone
 //!   (`integrator::trace`; `=1` forces packets). Both render the same bits.
-//!   Measured gains: README, *Performance by machine*.
+//!   Measured gains: docs/performance.md.
 //! - Light selection: proportional to power, each emitting light at least
 //!   10⁻³/N (`world::selection_pmf`), with the draw that places the sample
 //!   on the light (`World::choose_light`).
 //! - Performance: `bench/mitsuba_compare.sh` (Mitsuba `cornell_box()`, 256²,
 //!   max_depth 7 = max_bounces 6, 2 threads, CIE Y against one converged
-//!   Mitsuba reference, box filter, 4 seeds). The figures per machine and
-//!   their history are in the README (*Performance by machine*); on the
-//!   2-core AVX-512 EPYC (2026-11-28, 16 paths at a time, shading in
-//!   structure of arrays, relative roulette, rays regrouped across 32
-//!   packets, render jobs of several rows) camsim runs 1.18–1.19× Mitsuba's
-//!   paths/s (31 bands per path against 4 wavelengths), and with the Sobol
-//!   sampler in one batch its equal-time RMSE is 0.41 of Mitsuba's over all
-//!   pixels and 0.74 for light transport (emitter edge excluded).
+//!   Mitsuba reference, box filter, 4 seeds). The current figures per
+//!   machine are in the README (*Performance by machine*), their history in
+//!   docs/performance.md. On the 2-core AVX-512 EPYC (2026-11-29, 16 paths
+//!   at a time, shading in structure of arrays, relative roulette, rays
+//!   regrouped across 32 packets, render jobs of several rows) camsim runs
+//!   1.25× Mitsuba's paths/s (31 bands per path against 4 wavelengths), and
+//!   with the Sobol sampler in one batch its equal-time RMSE is 0.39 of
+//!   Mitsuba's over all pixels and 0.72 for light transport (emitter edge
+//!   excluded).
 //!   Converged images agree (mean Y ratio 0.9999, 16×16 blocks 0.38 % RMS).
 //!   Mitsuba's LLVM `render()` returns before its kernels run: time it to
 //!   completion. Russian roulette relative to the first bounce's

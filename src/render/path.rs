@@ -120,7 +120,7 @@ pub(super) fn add_emitted(
 /// Written with branches although the draw's outcome is random across a
 /// packet's lanes: a branch-free form (selects, the reference chosen by a
 /// bit mask) measured +0.6 % on the bench, within what the code's layout
-/// moves (README, *Tenth pass*).
+/// moves (docs/performance.md, *Tenth pass*).
 #[inline(always)]
 pub(super) fn roulette(st: &mut PathState, nb: usize, u_rr: f32, beta: &mut [f32]) -> bool {
     let mut m = max_band(beta) * st.eta_scale;

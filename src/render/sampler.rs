@@ -27,7 +27,7 @@
 //! 2-D draw on its own, Owen (1997) bounds a scrambled (0,m,2)-net's variance
 //! by e ≈ 2.718 times plain Monte Carlo's and shows it is o(1/n) for any
 //! square-integrable integrand; the padded copies make no such promise for
-//! the path as a whole, which is why the gain is measured (README), not
+//! the path as a whole, which is why the gain is measured (docs/performance.md), not
 //! assumed. What it buys: the `n` points of a batch are stratified in every
 //! elementary interval at once (2×2, 4×1, 1×4 cells for n = 4; 8×4, 4×8, … for
 //! 32), so soft shadows, emitter edges and the first indirect bounce converge
