@@ -3,21 +3,8 @@
 use camsim::image::CfaPattern;
 use std::process::Command;
 
-fn erfc(x: f64) -> f64 {
-    // Numerical Recipes erfcc, fractional error < 1.2e-7.
-    let z = x.abs();
-    let t = 1.0 / (1.0 + 0.5 * z);
-    let p = -z * z - 1.26551223
-        + t * (1.00002368
-            + t * (0.37409196
-                + t * (0.09678418
-                    + t * (-0.18628806
-                        + t * (0.27886807
-                            + t * (-1.13520398
-                                + t * (1.48851587 + t * (-0.82215223 + t * 0.17087277))))))));
-    let a = t * p.exp();
-    if x >= 0.0 { a } else { 2.0 - a }
-}
+mod common;
+use common::erfc;
 
 /// 5° edge, Gaussian σ, pixels = mean of 16×16 sub-samples, values 0.1…0.9.
 fn edge(w: usize, h: usize, sigma: f64) -> Vec<f64> {

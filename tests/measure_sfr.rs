@@ -10,21 +10,8 @@ use camsim::image::CfaPattern;
 use camsim::measure::plane::Plane;
 use camsim::measure::sfr::{SfrChannel, SfrOptions, sfr};
 
-/// erfc with fractional error < 1.2e-7 (Chebyshev fit, Numerical Recipes `erfcc`).
-fn erfc(x: f64) -> f64 {
-    let z = x.abs();
-    let t = 1.0 / (1.0 + 0.5 * z);
-    let p = -z * z - 1.26551223
-        + t * (1.00002368
-            + t * (0.37409196
-                + t * (0.09678418
-                    + t * (-0.18628806
-                        + t * (0.27886807
-                            + t * (-1.13520398
-                                + t * (1.48851587 + t * (-0.82215223 + t * 0.17087277))))))));
-    let ans = t * p.exp();
-    if x >= 0.0 { ans } else { 2.0 - ans }
-}
+mod common;
+use common::erfc;
 
 fn phi(z: f64) -> f64 {
     0.5 * erfc(-z / std::f64::consts::SQRT_2)
