@@ -152,6 +152,23 @@ def machine_cpu():
         return "unknown"
 
 
+# The vector-instruction flags the comparison depends on, as /proc/cpuinfo
+# lists them (Mitsuba's LLVM back end and camsim's kernels pick their width
+# from these).
+SIMD_FLAGS = ("sse4_1", "sse4_2", "avx", "avx2", "fma", "avx512f", "avx512dq", "avx512cd",
+              "avx512bw", "avx512vl", "avx512_vnni", "avx512_bf16", "avx512vbmi", "avx512ifma")
+
+
+def machine_simd_flags():
+    """The CPU's SIMD flags of SIMD_FLAGS, in that order ('unknown' off Linux)."""
+    try:
+        info = open("/proc/cpuinfo").read().splitlines()
+        flags = set(next(line.split(":", 1)[1].split() for line in info if line.startswith("flags")))
+    except (OSError, StopIteration):
+        return "unknown"
+    return " ".join(f for f in SIMD_FLAGS if f in flags) or "none of " + " ".join(SIMD_FLAGS)
+
+
 # camsim's batches and sampler for the timed renders (set in main()).
 CAMSIM_BATCHES = [1]
 CAMSIM_SAMPLER = ["sobol"]
@@ -311,6 +328,7 @@ def main():
               f"→ camsim/Mitsuba {res[k][1]:.3f} ± {res[k][1] * se_time:.3f}; at equal CPU time {res[k][2]:.3f}")
     k_all, k_lt = list(masks)
     print()
+    print(f"CPU SIMD flags: {machine_simd_flags()}")
     print(f"RATIO camsim/Mitsuba: paths/s {pps_c / (paths / tm):.3f} (wall), {cm / cc:.3f} (CPU); "
           f"equal-time RMSE {res[k_all][1]:.3f} (wall), {res[k_all][2]:.3f} (CPU); "
           f"light transport only {res[k_lt][1]:.3f} (wall); equal-spp RMSE {res[k_all][0]:.3f}  [RMSE < 1 = camsim better]; "
@@ -318,7 +336,7 @@ def main():
           f"({f'16 paths at a time, {CAMSIM_IN_FLIGHT[-1]} packets in flight' if CAMSIM_PACKETS and CAMSIM_PACKETS[-1] else 'one path at a time'}), "
           f"camsim sampler {a.sampler} in {a.batches} batch(es), load {os.getloadavg()[0]:.1f}")
     with open(os.path.join(a.cache, "last_result.json"), "w") as f:
-        json.dump({"load_average": os.getloadavg()[0], "cpu": machine_cpu(),
+        json.dump({"load_average": os.getloadavg()[0], "cpu": machine_cpu(), "simd_flags": machine_simd_flags(),
                    "mitsuba": {"variant": variant, "spp": a.spp, "wall_s": tm, "cpu_s": cm, "rel_rmse": rm},
                    "camsim": {"spp": a.spp, "wall_s": tc, "cpu_s": cc, "rel_rmse": rc},
                    "camsim_equal_time": {"spp": spp_eq, "wall_s": te, "cpu_s": ce, "rel_rmse": re_}},

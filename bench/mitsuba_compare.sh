@@ -5,7 +5,8 @@
 #
 # Prints for both renderers: paths/s, the relative RMSE of CIE Y luminance at
 # equal spp and at equal time against ONE converged Mitsuba reference, how
-# well camsim's converged image agrees with Mitsuba's, and a final line
+# well camsim's converged image agrees with Mitsuba's, and two final lines
+#   CPU SIMD flags: <the flags of /proc/cpuinfo that decide the vector width>
 #   RATIO camsim/Mitsuba: paths/s … ; equal-time RMSE … ; CPU <model> (<vector width>), load …
 # (the vector width is avx512f, avx2+fma or sse: Mitsuba's LLVM back end runs 16,
 # 8 or 4 paths per instruction, so the ratio depends on it; quote it with the ratio).
