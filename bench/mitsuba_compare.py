@@ -142,14 +142,23 @@ def machine_cpu():
     """CPU model and vector width: camsim's own report, else /proc/cpuinfo."""
     if CAMSIM_CPU:
         return CAMSIM_CPU[-1]
+    info = cpuinfo()
+    if info is None:
+        return "unknown"
+    model, flags = info
+    width = "avx512f" if "avx512f" in flags else "avx2+fma" if {"avx2", "fma"} <= flags else "sse"
+    return f"{model} ({width})"
+
+
+def cpuinfo():
+    """(model name, set of flags) of the first CPU in /proc/cpuinfo; None off Linux."""
     try:
         info = open("/proc/cpuinfo").read().splitlines()
         model = next(line.split(":", 1)[1].strip() for line in info if line.startswith("model name"))
         flags = next(line.split(":", 1)[1].split() for line in info if line.startswith("flags"))
-        width = "avx512f" if "avx512f" in flags else "avx2+fma" if {"avx2", "fma"} <= set(flags) else "sse"
-        return f"{' '.join(model.split())} ({width})"
     except (OSError, StopIteration):
-        return "unknown"
+        return None
+    return " ".join(model.split()), set(flags)
 
 
 # The vector-instruction flags the comparison depends on, as /proc/cpuinfo
@@ -161,11 +170,10 @@ SIMD_FLAGS = ("sse4_1", "sse4_2", "avx", "avx2", "fma", "avx512f", "avx512dq", "
 
 def machine_simd_flags():
     """The CPU's SIMD flags of SIMD_FLAGS, in that order ('unknown' off Linux)."""
-    try:
-        info = open("/proc/cpuinfo").read().splitlines()
-        flags = set(next(line.split(":", 1)[1].split() for line in info if line.startswith("flags")))
-    except (OSError, StopIteration):
+    info = cpuinfo()
+    if info is None:
         return "unknown"
+    flags = info[1]
     return " ".join(f for f in SIMD_FLAGS if f in flags) or "none of " + " ".join(SIMD_FLAGS)
 
 
@@ -328,7 +336,8 @@ def main():
               f"→ camsim/Mitsuba {res[k][1]:.3f} ± {res[k][1] * se_time:.3f}; at equal CPU time {res[k][2]:.3f}")
     k_all, k_lt = list(masks)
     print()
-    print(f"CPU SIMD flags: {machine_simd_flags()}")
+    simd_flags = machine_simd_flags()
+    print(f"CPU SIMD flags: {simd_flags}")
     print(f"RATIO camsim/Mitsuba: paths/s {pps_c / (paths / tm):.3f} (wall), {cm / cc:.3f} (CPU); "
           f"equal-time RMSE {res[k_all][1]:.3f} (wall), {res[k_all][2]:.3f} (CPU); "
           f"light transport only {res[k_lt][1]:.3f} (wall); equal-spp RMSE {res[k_all][0]:.3f}  [RMSE < 1 = camsim better]; "
@@ -336,7 +345,7 @@ def main():
           f"({f'16 paths at a time, {CAMSIM_IN_FLIGHT[-1]} packets in flight' if CAMSIM_PACKETS and CAMSIM_PACKETS[-1] else 'one path at a time'}), "
           f"camsim sampler {a.sampler} in {a.batches} batch(es), load {os.getloadavg()[0]:.1f}")
     with open(os.path.join(a.cache, "last_result.json"), "w") as f:
-        json.dump({"load_average": os.getloadavg()[0], "cpu": machine_cpu(), "simd_flags": machine_simd_flags(),
+        json.dump({"load_average": os.getloadavg()[0], "cpu": machine_cpu(), "simd_flags": simd_flags,
                    "mitsuba": {"variant": variant, "spp": a.spp, "wall_s": tm, "cpu_s": cm, "rel_rmse": rm},
                    "camsim": {"spp": a.spp, "wall_s": tc, "cpu_s": cc, "rel_rmse": rc},
                    "camsim_equal_time": {"spp": spp_eq, "wall_s": te, "cpu_s": ce, "rel_rmse": re_}},

@@ -14,10 +14,9 @@ use camsim::measure::stats::SplitMix64;
 use camsim::measure::{Measured, mcc};
 use camsim::report::diff::{DiffOptions, diff_rows, read_dir_results};
 use camsim::report::results::{ResultRow, write_curves, write_results};
+use common::erfc;
 use std::path::{Path, PathBuf};
 use std::process::Command;
-
-use common::erfc;
 
 const CG: f64 = 0.17;
 
