@@ -161,8 +161,7 @@ impl Pre {
     }
 
     /// `PacketPre::triangle`: triangle `j` of `p` against the lanes of `m`.
-    #[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512dq")]
-    #[inline]
+    #[inline(always)]
     unsafe fn triangle(
         &self,
         p: &TriPacket,
