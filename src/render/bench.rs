@@ -520,6 +520,7 @@ pub fn run(o: &BenchOptions) -> Result<String> {
     let mut timed: Option<(OpticalImage, f64)> = None;
     for &kind in &o.bvh {
         let world = World::build(&scene, &settings.grid, kind)?;
+        super::stages::reset();
         let cpu0 = cpu_time_s();
         let img = render_world(&world, &cam, &to_world, &film, &settings, names.clone())?;
         let cpu = cpu_time_s()
@@ -536,6 +537,9 @@ pub fn run(o: &BenchOptions) -> Result<String> {
             img.nan_count
         );
         if timed.is_none() {
+            if let Some(r) = super::stages::report() {
+                out += &r;
+            }
             timed = Some((img, cpu));
         }
     }

@@ -11,6 +11,7 @@ use super::sampler::{BatchScramble, Sampler, SamplerKind};
 use super::sampling::Rng;
 use super::settings::RenderSettings;
 use super::simd::RenderIsa;
+use super::stages::{Clock, Stage};
 use super::world::World;
 use crate::optical_image::{OpticalImage, Rect};
 use crate::optics::{Camera, CameraRay};
@@ -583,6 +584,7 @@ impl RunJob<'_> {
         // The pixel whose samples are being issued, and its slot.
         let mut next_ix = 0usize;
         let mut issuing: Option<usize> = None;
+        let mut clock = Clock::start();
         loop {
             // Every idle lane takes the run's next sample that the camera
             // lets through, packet after packet and lane after lane, as
@@ -688,17 +690,22 @@ impl RunJob<'_> {
                     }
                 }
             }
+            clock.lap(Stage::Camera);
             if pk.iter().all(|p| p.alive == 0) {
                 break;
             }
             for (p, sc) in pk.iter().zip(scs.iter_mut()) {
                 packet_rays(&p.paths, p.alive, sc);
             }
+            clock.lap(Stage::PacketRays);
             stream.intersect(world, &mut scs);
+            clock.lap(Stage::ClosestHits);
             for (p, sc) in pk.iter_mut().zip(scs.iter_mut()) {
                 p.ended = shade_hits(world, &mut p.paths, p.alive, s.max_bounces, &mut p.smps, sc);
             }
+            clock.lap(Stage::Shade);
             stream.unoccluded(world, &scs, &mut unblocked);
+            clock.lap(Stage::ShadowRays);
             for ((p, sc), &free_lanes) in pk.iter_mut().zip(scs.iter_mut()).zip(&unblocked) {
                 add_unblocked(free_lanes, sc);
                 for lane in lanes(p.ended) {
@@ -710,6 +717,7 @@ impl RunJob<'_> {
                 }
                 p.alive &= !p.ended;
             }
+            clock.lap(Stage::BounceEnd);
         }
     }
 

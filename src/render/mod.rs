@@ -103,6 +103,7 @@ pub mod sampling;
 pub mod settings;
 mod shade_packet;
 pub mod simd;
+mod stages;
 pub mod world;
 
 use crate::Result;

@@ -37,6 +37,7 @@ use super::path::{PathState, SHADOW_EPS, add_emitted, roulette};
 use super::ray_packet::{LANES, LaneMask, PacketHits, RayPacket, lanes};
 use super::sampler::Sampler;
 use super::sampling::{Frame, cosine_hemisphere, power_heuristic, uniform_triangle};
+use super::stages::{Clock, Stage};
 use super::world::{LightKind, World};
 use glam::Vec3;
 use std::f32::consts::PI;
@@ -115,6 +116,7 @@ pub(super) fn shade_diffuse(
     // The bounce's draws, in `scatter`'s order.
     let (mut u1, mut u2) = ([0.5f32; LANES], [0.5f32; LANES]);
     let (mut v1, mut v2, mut u_rr) = ([0.5f32; LANES], [0.5f32; LANES], [0f32; LANES]);
+    let mut clock = Clock::start();
     let mut ended: LaneMask = 0;
     let mut go: LaneMask = 0;
     let mut emitters: LaneMask = 0;
@@ -144,6 +146,7 @@ pub(super) fn shade_diffuse(
         u_rr[i] = sm.get1d();
     }
 
+    clock.lap(Stage::ShadeLanes);
     // The hit, its frame, the BSDF sample and the continuation ray, all lanes;
     // with the ray's length and the cosine at the hit for emission.
     let mut pt = Lanes3::splat(Vec3::ZERO);
@@ -198,6 +201,7 @@ pub(super) fn shade_diffuse(
         (ray_len[l], cos_hit[l]) = (dlen, cos);
     }
 
+    clock.lap(Stage::ShadeHit);
     // Emission (lanes that hit an emitter), before the throughput changes.
     for i in lanes(emitters) {
         let span = i * stride..(i + 1) * stride;
@@ -211,6 +215,7 @@ pub(super) fn shade_diffuse(
             &mut rad[span],
         );
     }
+    clock.lap(Stage::ShadeEmission);
     if go == 0 {
         return ended;
     }
@@ -256,6 +261,7 @@ pub(super) fn shade_diffuse(
             nee |= 1 << i;
         }
     }
+    clock.lap(Stage::ShadeLightChoice);
     let mut shadow_d = Lanes3::splat(Vec3::Z);
     let mut tmax = [0f32; LANES];
     let mut scale = [0f32; LANES];
@@ -304,6 +310,7 @@ pub(super) fn shade_diffuse(
         }
     }
 
+    clock.lap(Stage::ShadeNextEvent);
     // Per lane: the band vectors and the path's state.
     let nb = world.bands;
     for i in lanes(go) {
@@ -346,5 +353,6 @@ pub(super) fn shade_diffuse(
             ended |= 1 << i;
         }
     }
+    clock.lap(Stage::ShadeBands);
     ended
 }
