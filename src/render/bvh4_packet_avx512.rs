@@ -161,6 +161,16 @@ impl Pre {
     }
 
     /// `PacketPre::triangle`: triangle `j` of `p` against the lanes of `m`.
+    ///
+    /// Always inlined into its two callers, `intersect_packet` and
+    /// `unoccluded_packet`, which enable the AVX-512 features it needs (rustc
+    /// allows no `#[inline(always)]` beside `#[target_feature]`). Called out of
+    /// line, each test spilled the traversal's vector registers around the
+    /// call and passed its operands through memory: 1.3 % of the render
+    /// (docs/performance.md, *Fifteenth pass*).
+    ///
+    /// # Safety
+    /// Only from a function with AVX-512 F, VL, BW and DQ enabled.
     #[inline(always)]
     unsafe fn triangle(
         &self,
