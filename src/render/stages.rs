@@ -65,6 +65,17 @@ const ALL: [Stage; 12] = [
     Stage::ShadeBands,
 ];
 
+// Every stage is in `ALL`, in declaration order (a stage indexes its counter).
+#[cfg(feature = "stage-timing")]
+const _: () = {
+    let mut i = 0;
+    while i < ALL.len() {
+        assert!(ALL[i] as usize == i);
+        i += 1;
+    }
+    assert!(Stage::ShadeBands as usize + 1 == ALL.len());
+};
+
 #[cfg(feature = "stage-timing")]
 mod imp {
     use super::{ALL, Stage};
