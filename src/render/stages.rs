@@ -124,13 +124,15 @@ mod imp {
             .iter()
             .map(|t| t.load(Ordering::Relaxed) as f64)
             .collect();
-        let total: f64 = t[..6].iter().sum();
+        // The stages of a bounce come first; those within `Shade` after them.
+        let nb = Stage::ShadeLanes as usize;
+        let total: f64 = t[..nb].iter().sum();
         if !(total > 0.0) {
             return None;
         }
         let part = |s: Stage| format!("{:?} {:.1} %", s, 100.0 * t[s as usize] / total);
-        let bounce: Vec<String> = ALL[..6].iter().map(|&s| part(s)).collect();
-        let shade: Vec<String> = ALL[6..].iter().map(|&s| part(s)).collect();
+        let bounce: Vec<String> = ALL[..nb].iter().map(|&s| part(s)).collect();
+        let shade: Vec<String> = ALL[nb..].iter().map(|&s| part(s)).collect();
         Some(format!(
             "stage times (time-stamp counter, share of the packet kernel): {}\n  of which in Shade: {}\n",
             bounce.join(", "),
