@@ -66,6 +66,35 @@ fn bench_scene_mean_luminance_matches_mitsuba() {
     assert!(stdout.contains(" rmse_y=0.000000e0 "), "{stdout}");
 }
 
+/// `--max-bounces 0` reaches the renderer: only the emitter, seen directly,
+/// is left. At 1 spp each pixel's one sample sees the uniform light (the same
+/// Y in every such pixel) or nothing lit (Y = 0); the default 6 bounces light
+/// every wall.
+#[test]
+fn bench_max_bounces_reaches_the_render() {
+    let dir = tempfile::tempdir().unwrap();
+    let y = dir.path().join("y.pfm");
+    let stdout = stdout_of_success(
+        bench_1spp()
+            .args(["--ref-spp", "0", "--max-bounces", "0", "--y-out"])
+            .arg(&y),
+    );
+    assert!(stdout.contains(" max_bounces=0"), "{stdout}");
+    assert!(
+        stdout.contains("max_bounces 0 (Mitsuba max_depth 1)"),
+        "{stdout}"
+    );
+    let (_, _, d) = camsim::render::bench::read_pfm(&y).unwrap();
+    let lit: Vec<f32> = d.iter().copied().filter(|&v| v != 0.0).collect();
+    // The light covers a few per cent of the image.
+    assert!(
+        !lit.is_empty() && lit.len() < d.len() / 20,
+        "{} lit pixels",
+        lit.len()
+    );
+    assert!(lit.iter().all(|&v| v == lit[0]), "more than one lit value");
+}
+
 #[test]
 fn bench_render_rejects_bad_options_with_named_files() {
     let dir = tempfile::tempdir().unwrap();

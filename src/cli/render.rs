@@ -52,6 +52,11 @@ pub struct BenchArgs {
     /// Wavelength bands carried per path (400–700 nm).
     #[arg(long, default_value_t = 31)]
     pub bands: usize,
+    /// render: bounce limit of the timed render (pbrt's count: 0 = emitters
+    /// seen directly; Mitsuba's max_depth is one more). The comparison with
+    /// Mitsuba is at 6.
+    #[arg(long, default_value_t = 6)]
+    pub max_bounces: u32,
     /// render: seed of the timed render.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -255,6 +260,7 @@ pub fn bench(a: BenchArgs) -> Result<i32> {
                 ref_spp: a.ref_spp,
                 threads: a.threads,
                 bands: a.bands,
+                max_bounces: a.max_bounces,
                 seed: a.seed,
                 bvh,
                 reference: a.reference,

@@ -445,6 +445,10 @@ pub struct BenchOptions {
     pub threads: usize,
     /// Bands on 400–700 nm.
     pub bands: usize,
+    /// Bounce limit (pbrt's count; Mitsuba's `max_depth` is one more). The
+    /// comparison with Mitsuba is at 6; other limits split a path's time by
+    /// depth (`bench/mitsuba_depths.sh`).
+    pub max_bounces: u32,
     pub seed: u64,
     /// Acceleration structures to time (the first one's image is kept).
     pub bvh: Vec<BvhKind>,
@@ -467,6 +471,7 @@ impl Default for BenchOptions {
             ref_spp: 256,
             threads: 2,
             bands: 31,
+            max_bounces: 6,
             seed: 1,
             bvh: vec![BvhKind::Bvh4, BvhKind::Bvh2, BvhKind::Cwbvh],
             reference: None,
@@ -495,7 +500,7 @@ pub fn run(o: &BenchOptions) -> Result<String> {
     let bands = o.bands.max(1);
     let settings = RenderSettings {
         spp: o.spp,
-        max_bounces: 6,
+        max_bounces: o.max_bounces,
         threads: o.threads,
         seed: o.seed,
         batches: o.batches,
@@ -512,8 +517,10 @@ pub fn run(o: &BenchOptions) -> Result<String> {
         ..Default::default()
     };
     let mut out = format!(
-        "Mitsuba 3 cornell_box(): 256×256, {} bands per path, max_bounces 6 (Mitsuba max_depth 7), {} threads, film = radiance, box filter\n",
+        "Mitsuba 3 cornell_box(): 256×256, {} bands per path, max_bounces {} (Mitsuba max_depth {}), {} threads, film = radiance, box filter\n",
         settings.grid.len(),
+        o.max_bounces,
+        o.max_bounces as u64 + 1,
         o.threads
     );
     let paths = film.width_px as f64 * film.height_px as f64 * o.spp as f64;
@@ -557,7 +564,7 @@ pub fn run(o: &BenchOptions) -> Result<String> {
         "render paths: one at a time (CAMSIM_RENDER_PACKETS=1 for 16 at a time)\n".to_string()
     };
     let mut kv = format!(
-        "camsim-bench spp={} wall_s={:.4} cpu_s={:.4} paths_per_s={:.1} mean_y={:.6} render_isa={isa} packets={} batches={} sampler={} in_flight={}",
+        "camsim-bench spp={} wall_s={:.4} cpu_s={:.4} paths_per_s={:.1} mean_y={:.6} render_isa={isa} packets={} batches={} sampler={} in_flight={} max_bounces={}",
         o.spp,
         timed.render_s,
         cpu,
@@ -566,7 +573,8 @@ pub fn run(o: &BenchOptions) -> Result<String> {
         kernel.packets,
         settings.batches.clamp(1, o.spp),
         o.sampler.name(),
-        kernel.reported_in_flight()
+        kernel.reported_in_flight(),
+        o.max_bounces
     );
     if let Some(p) = &o.y_out {
         write_pfm(p, film.width_px as usize, film.height_px as usize, &y)?;

@@ -594,6 +594,8 @@ impl RunJob<'_> {
             // samples as there are idle lanes are drawn first, their camera
             // rays made together, and the ones that pass handed out in
             // order; vignetted ones leave lanes idle for another round.
+            // The camera stage's parts (`clock` times the whole).
+            let mut sub = Clock::start();
             loop {
                 let want: usize = pk
                     .iter()
@@ -654,6 +656,7 @@ impl RunJob<'_> {
                     }
                 }
                 let drawn = cam.who.len();
+                sub.lap(Stage::CameraDraws);
                 if drawn == 0 {
                     break;
                 }
@@ -663,6 +666,7 @@ impl RunJob<'_> {
                     &cam.lambda_nm[..drawn],
                     &mut cam.rays[..drawn],
                 );
+                sub.lap(Stage::CameraRays);
                 // Hand the samples that pass to the idle lanes in order.
                 let mut pi = 0;
                 for j in 0..drawn {
@@ -689,6 +693,7 @@ impl RunJob<'_> {
                         self.finish_if_traced(slot, k, order, out, &mut free);
                     }
                 }
+                sub.lap(Stage::CameraHandOut);
             }
             clock.lap(Stage::Camera);
             if pk.iter().all(|p| p.alive == 0) {
@@ -706,8 +711,10 @@ impl RunJob<'_> {
             clock.lap(Stage::Shade);
             stream.unoccluded(world, &scs, &mut unblocked);
             clock.lap(Stage::ShadowRays);
+            let mut sub = Clock::start();
             for ((p, sc), &free_lanes) in pk.iter_mut().zip(scs.iter_mut()).zip(&unblocked) {
                 add_unblocked(free_lanes, sc);
+                sub.lap(Stage::EndUnblocked);
                 for lane in lanes(p.ended) {
                     let (k, n) = (p.slot[lane], p.sample[lane]);
                     let slot = &mut slots[k];
@@ -716,6 +723,7 @@ impl RunJob<'_> {
                     self.finish_if_traced(slot, k, order, out, &mut free);
                 }
                 p.alive &= !p.ended;
+                sub.lap(Stage::EndPaths);
             }
             clock.lap(Stage::BounceEnd);
         }

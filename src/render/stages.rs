@@ -46,11 +46,39 @@ pub(super) enum Stage {
     ShadeNextEvent,
     /// Within `Shade`: band vectors, bounce count, Russian roulette.
     ShadeBands,
+    /// Within `Camera`: the samples' draws (and each new pixel's start).
+    CameraDraws,
+    /// Within `Camera`: the camera's rays of the drawn samples.
+    CameraRays,
+    /// Within `Camera`: the paths handed to idle lanes.
+    CameraHandOut,
+    /// Within `BounceEnd`: the unblocked next-event terms added.
+    EndUnblocked,
+    /// Within `BounceEnd`: finished paths stored, finished pixels summed.
+    EndPaths,
+}
+
+impl Stage {
+    /// The stage of a bounce this one is part of (None: a bounce's own).
+    #[cfg(feature = "stage-timing")]
+    const fn parent(self) -> Option<Stage> {
+        match self {
+            Stage::ShadeLanes
+            | Stage::ShadeHit
+            | Stage::ShadeEmission
+            | Stage::ShadeLightChoice
+            | Stage::ShadeNextEvent
+            | Stage::ShadeBands => Some(Stage::Shade),
+            Stage::CameraDraws | Stage::CameraRays | Stage::CameraHandOut => Some(Stage::Camera),
+            Stage::EndUnblocked | Stage::EndPaths => Some(Stage::BounceEnd),
+            _ => None,
+        }
+    }
 }
 
 /// Stages in report order.
 #[cfg(feature = "stage-timing")]
-const ALL: [Stage; 12] = [
+const ALL: [Stage; 17] = [
     Stage::Camera,
     Stage::PacketRays,
     Stage::ClosestHits,
@@ -63,6 +91,11 @@ const ALL: [Stage; 12] = [
     Stage::ShadeLightChoice,
     Stage::ShadeNextEvent,
     Stage::ShadeBands,
+    Stage::CameraDraws,
+    Stage::CameraRays,
+    Stage::CameraHandOut,
+    Stage::EndUnblocked,
+    Stage::EndPaths,
 ];
 
 // Every stage is in `ALL`, in declaration order (a stage indexes its counter).
@@ -73,7 +106,7 @@ const _: () = {
         assert!(ALL[i] as usize == i);
         i += 1;
     }
-    assert!(Stage::ShadeBands as usize + 1 == ALL.len());
+    assert!(Stage::EndPaths as usize + 1 == ALL.len());
 };
 
 #[cfg(feature = "stage-timing")]
@@ -124,20 +157,30 @@ mod imp {
             .iter()
             .map(|t| t.load(Ordering::Relaxed) as f64)
             .collect();
-        // The stages of a bounce come first; those within `Shade` after them.
-        let nb = Stage::ShadeLanes as usize;
-        let total: f64 = t[..nb].iter().sum();
+        // Shares of the bounce's own stages' total.
+        let total: f64 = ALL
+            .iter()
+            .filter(|s| s.parent().is_none())
+            .map(|&s| t[s as usize])
+            .sum();
         if !(total > 0.0) {
             return None;
         }
-        let part = |s: Stage| format!("{:?} {:.1} %", s, 100.0 * t[s as usize] / total);
-        let bounce: Vec<String> = ALL[..nb].iter().map(|&s| part(s)).collect();
-        let shade: Vec<String> = ALL[nb..].iter().map(|&s| part(s)).collect();
-        Some(format!(
-            "stage times (time-stamp counter, share of the packet kernel): {}\n  of which in Shade: {}\n",
-            bounce.join(", "),
-            shade.join(", ")
-        ))
+        let part = |s: &Stage| format!("{:?} {:.1} %", s, 100.0 * t[*s as usize] / total);
+        let within = |p: Option<Stage>| -> Vec<String> {
+            ALL.iter()
+                .filter(|s| s.parent().map(|x| x as usize) == p.map(|x| x as usize))
+                .map(part)
+                .collect()
+        };
+        let mut out = format!(
+            "stage times (time-stamp counter, share of the packet kernel): {}\n",
+            within(None).join(", ")
+        );
+        for p in [Stage::Camera, Stage::Shade, Stage::BounceEnd] {
+            out += &format!("  of which in {p:?}: {}\n", within(Some(p)).join(", "));
+        }
+        Some(out)
     }
 }
 
