@@ -61,7 +61,7 @@ def read_pfm(path):
     return img[::-1].astype(np.float64)
 
 
-def load_mitsuba(threads):
+def load_mitsuba(threads, max_depth=7):
     import drjit as dr
     import mitsuba as mi
 
@@ -79,7 +79,7 @@ def load_mitsuba(threads):
         print("WARNING: llvm_ad_spectral unavailable (install libllvm19); timing scalar_spectral", file=sys.stderr)
     dr.set_thread_count(threads)
     d = mi.cornell_box()
-    d["integrator"] = {"type": "path", "max_depth": 7}
+    d["integrator"] = {"type": "path", "max_depth": max_depth}
     d["sensor"]["film"]["width"] = W
     d["sensor"]["film"]["height"] = H
     # Box filter: each sample lands in its own pixel, as in camsim (the default

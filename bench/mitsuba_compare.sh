@@ -33,27 +33,8 @@
 #   camsim; the RATIO line names both.
 set -euo pipefail
 SPP="${1:-32}"
-HERE="$(cd "$(dirname "$0")/.." && pwd)"
-TARGET="${CARGO_TARGET_DIR:-$HERE/target}"
-BENCH_DIR="${BENCH_DIR:-$TARGET/mitsuba-bench}"
-VENV="${MITSUBA_VENV:-$BENCH_DIR/venv}"
-CAMSIM="${CAMSIM:-$TARGET/release/camsim}"
-
-if ! ldconfig -p | grep -q 'libLLVM.so.19\|libLLVM-19'; then
-    echo "note: Debian's libllvm19 not found; Mitsuba's llvm_* variants need it: apt-get install libllvm19" >&2
-    echo "      (without it the script falls back to the much slower scalar_spectral variant)" >&2
-fi
-mkdir -p "$BENCH_DIR"
-if [ ! -x "$VENV/bin/python" ]; then
-    python3 -m venv "$VENV"
-fi
-if ! "$VENV/bin/python" -c "import mitsuba, numpy" 2>/dev/null; then
-    "$VENV/bin/pip" install --quiet mitsuba numpy
-fi
-if [ -z "${CAMSIM_NO_BUILD:-}" ]; then
-    (cd "$HERE" && CARGO_TARGET_DIR="$TARGET" cargo build --release --quiet)
-fi
-[ -x "$CAMSIM" ] || { echo "camsim binary not found at $CAMSIM" >&2; exit 1; }
+# shellcheck source=bench/mitsuba_env.sh
+source "$(dirname "$0")/mitsuba_env.sh"
 
 exec "$VENV/bin/python" "$HERE/bench/mitsuba_compare.py" \
     --camsim "$CAMSIM" --cache "$BENCH_DIR" --spp "$SPP" \

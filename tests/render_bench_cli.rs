@@ -115,6 +115,12 @@ fn bench_render_rejects_bad_options_with_named_files() {
         .unwrap();
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--bvh 'octree'"));
+
+    // No bands is an error, not one band.
+    let out = bench_1spp().args(["--bands", "0"]).output().unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--bands 0"), "{err}");
 }
 
 /// `CAMSIM_RENDER_ISA` lowers the render kernel's level (sse runs on every

@@ -497,7 +497,12 @@ pub fn run(o: &BenchOptions) -> Result<String> {
         .map(|c| c.to_world)
         .unwrap_or(DMat4::IDENTITY);
     let names: Vec<String> = scene.objects.iter().map(|x| x.name.clone()).collect();
-    let bands = o.bands.max(1);
+    if o.bands == 0 {
+        return Err(Error::invalid(
+            "bench render: --bands 0: expected at least 1 band",
+        ));
+    }
+    let bands = o.bands;
     let settings = RenderSettings {
         spp: o.spp,
         max_bounces: o.max_bounces,
