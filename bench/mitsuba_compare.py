@@ -182,10 +182,11 @@ CAMSIM_BATCHES = [1]
 CAMSIM_SAMPLER = ["sobol"]
 
 
-def run_camsim(camsim, spp, seed, y_out, threads):
-    cmd = [camsim, "bench", "render", "--spp", str(spp), "--ref-spp", "0", "--bvh", "bvh4",
-           "--threads", str(threads), "--seed", str(seed), "--y-out", y_out,
-           "--batches", str(CAMSIM_BATCHES[0]), "--sampler", CAMSIM_SAMPLER[0]]
+def camsim_bench(camsim, args):
+    """`camsim bench render` with `args` (no reference render, the renderer's
+    BVH): its machine line's key=value pairs; the CPU, kernel and packet mode
+    are noted for the RATIO line."""
+    cmd = [camsim, "bench", "render", "--ref-spp", "0", "--bvh", "bvh4", *args]
     out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
     CAMSIM_CPU.extend(line[len("cpu: "):] for line in out.splitlines() if line.startswith("cpu: "))
     kv_line = [line for line in out.splitlines() if line.startswith("camsim-bench ")][-1]
@@ -193,6 +194,13 @@ def run_camsim(camsim, spp, seed, y_out, threads):
     CAMSIM_ISA.append(kv.get("render_isa", "?"))
     CAMSIM_PACKETS.append(kv.get("packets", "false") == "true")
     CAMSIM_IN_FLIGHT.append(kv.get("in_flight", "1"))
+    return kv
+
+
+def run_camsim(camsim, spp, seed, y_out, threads):
+    kv = camsim_bench(camsim, ["--spp", str(spp), "--threads", str(threads), "--seed", str(seed),
+                               "--y-out", y_out, "--batches", str(CAMSIM_BATCHES[0]),
+                               "--sampler", CAMSIM_SAMPLER[0]])
     return read_pfm(y_out), float(kv["wall_s"]), float(kv["cpu_s"])
 
 

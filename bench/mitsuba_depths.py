@@ -20,8 +20,6 @@ that compiles its kernel, timed to completion with dr.sync_thread(); camsim's
 
 import argparse
 import os
-import re
-import subprocess
 import time
 
 import mitsuba_compare as mc
@@ -29,16 +27,10 @@ import mitsuba_compare as mc
 
 def camsim_s(camsim, spp, max_bounces, seed, threads):
     """camsim's render wall time (s) at this bounce limit."""
-    cmd = [camsim, "bench", "render", "--spp", str(spp), "--ref-spp", "0", "--bvh", "bvh4",
-           "--batches", "1", "--threads", str(threads), "--seed", str(seed),
-           "--max-bounces", str(max_bounces)]
-    out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
-    mc.CAMSIM_CPU.extend(line[len("cpu: "):] for line in out.splitlines() if line.startswith("cpu: "))
-    kv_line = [line for line in out.splitlines() if line.startswith("camsim-bench ")][-1]
-    kv = dict(re.findall(r"(\w+)=(\S+)", kv_line))
+    kv = mc.camsim_bench(camsim, ["--spp", str(spp), "--batches", "1", "--threads", str(threads),
+                                  "--seed", str(seed), "--max-bounces", str(max_bounces)])
     if int(kv.get("max_bounces", -1)) != max_bounces:
-        raise SystemExit(f"camsim did not render at max_bounces {max_bounces}: {kv_line}")
-    mc.CAMSIM_ISA.append(kv.get("render_isa", "?"))
+        raise SystemExit(f"camsim did not render at max_bounces {max_bounces}: {kv}")
     return float(kv["wall_s"])
 
 
