@@ -6,7 +6,7 @@
 //! `film::RunJob::run_packets` and of `shade_packet::shade_diffuse` adds the
 //! processor's time-stamp counter across it to a counter of its own, and
 //! `camsim bench render` prints the shares of its timed render
-//! (docs/performance.md, *Fifteenth pass*):
+//! (docs/performance.md, *Fifteenth* and *Sixteenth pass*):
 //!
 //! ```text
 //! cargo build --release --features stage-timing
@@ -177,8 +177,12 @@ mod imp {
             "stage times (time-stamp counter, share of the packet kernel): {}\n",
             within(None).join(", ")
         );
-        for p in [Stage::Camera, Stage::Shade, Stage::BounceEnd] {
-            out += &format!("  of which in {p:?}: {}\n", within(Some(p)).join(", "));
+        // Each stage of a bounce that has parts, with them.
+        for &p in ALL.iter().filter(|s| s.parent().is_none()) {
+            let parts = within(Some(p));
+            if !parts.is_empty() {
+                out += &format!("  of which in {p:?}: {}\n", parts.join(", "));
+            }
         }
         Some(out)
     }
