@@ -20,7 +20,7 @@
 
 /// A stage of a bounce (`run_packets`) or of a packet's diffuse shading
 /// (`shade_diffuse`).
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum Stage {
     /// Drawing samples, the camera's rays, handing the paths to lanes.
     Camera,
@@ -168,10 +168,7 @@ mod imp {
         }
         let part = |s: &Stage| format!("{:?} {:.1} %", s, 100.0 * t[*s as usize] / total);
         let within = |p: Option<Stage>| -> Vec<String> {
-            ALL.iter()
-                .filter(|s| s.parent().map(|x| x as usize) == p.map(|x| x as usize))
-                .map(part)
-                .collect()
+            ALL.iter().filter(|s| s.parent() == p).map(part).collect()
         };
         let mut out = format!(
             "stage times (time-stamp counter, share of the packet kernel): {}\n",
