@@ -25,9 +25,15 @@ fn stdout_of_success(c: &mut Command) -> String {
     stdout
 }
 
-fn read_pfm_mean(p: &std::path::Path) -> f64 {
+/// The bench's 256×256 CIE Y image written to `p`.
+fn read_bench_y(p: &std::path::Path) -> Vec<f32> {
     let (w, h, d) = camsim::render::bench::read_pfm(p).unwrap();
     assert_eq!((w, h), (256, 256));
+    d
+}
+
+fn read_pfm_mean(p: &std::path::Path) -> f64 {
+    let d = read_bench_y(p);
     d.iter().map(|&x| x as f64).sum::<f64>() / d.len() as f64
 }
 
@@ -84,7 +90,7 @@ fn bench_max_bounces_reaches_the_render() {
         stdout.contains("max_bounces 0 (Mitsuba max_depth 1)"),
         "{stdout}"
     );
-    let (_, _, d) = camsim::render::bench::read_pfm(&y).unwrap();
+    let d = read_bench_y(&y);
     let lit: Vec<f32> = d.iter().copied().filter(|&v| v != 0.0).collect();
     // The light covers a few per cent of the image.
     assert!(
