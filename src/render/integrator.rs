@@ -348,8 +348,8 @@ impl PacketScratch {
 // One bounce of a packet's paths (issue 17 item 1) is three steps, so that a
 // row can cast the rays of several packets together (`ray_stream`):
 // `packet_rays` (the live lanes' rays), the closest hits, `shade_hits` (the
-// lanes whose hits `World::packet_shadable` accepts — Lambertian triangles,
-// triangle area lights — shaded together in structure of arrays by
+// lanes whose hits `World::packet_shadable` accepts — Lambertian triangles
+// — shaded together in structure of arrays by
 // `shade_packet::shade_diffuse`, every other lane on its own by `scatter`;
 // their shadow rays), the shadow rays' occlusion, then `add_unblocked`. Lane
 // `l` continues from `st[l]` with its throughput and radiance in the packet's

@@ -1,7 +1,9 @@
 //! One bounce of a packet's Lambertian hits, shaded together in structure of
 //! arrays (issue 17 item 1): the hit point and its error bound, the shading
 //! frame, the offset ray origins, the light sample on a triangle area light
-//! with its MIS weight and shadow ray, and the cosine-weighted BSDF sample,
+//! with its MIS weight and shadow ray (a light of another kind is sampled
+//! lane by lane, by `World::sample_chosen_light` as `scatter` samples it),
+//! and the cosine-weighted BSDF sample,
 //! each computed for all sixteen lanes at once by a plain lane loop that the
 //! render kernel's per-instruction-set copies (`simd.rs`) run 16, 8 or 4
 //! lanes per instruction. What stays lane by lane is what is per lane by
@@ -10,8 +12,10 @@
 //! (next-event contribution, throughput, Russian roulette).
 //!
 //! Which hits: a triangle with a `Diffuse` material and no shading normals,
-//! in a world whose lights are all area lights on triangles
-//! (`World::packet_shadable`). Every other hit goes through
+//! under lights of any kind (`World::packet_shadable`; before 2026-11-29
+//! only in worlds whose lights were all area lights on triangles, so the
+//! paper's figures with a spot light shaded every hit one lane at a time).
+//! Every other hit goes through
 //! `integrator::scatter` one lane at a time.
 //!
 //! Same bits as `scatter`: each lane loop calls the very scalar functions
@@ -231,6 +235,9 @@ pub(super) fn shade_diffuse(
     let mut two_sided = [false; LANES];
     let mut light = [0usize; LANES];
     let mut nee: LaneMask = 0;
+    // Lanes whose light is not an area light on a triangle: sampled one by
+    // one after the lane loop below.
+    let mut other: LaneMask = 0;
     if !world.lights.is_empty() {
         for i in lanes(go) {
             if !(wo_z[i] > 0.0) {
@@ -241,24 +248,24 @@ pub(super) fn shade_diffuse(
             if !(s > 0.0) {
                 continue;
             }
-            let LightKind::Area {
+            (sel[i], light[i]) = (s, idx);
+            nee |= 1 << i;
+            if let LightKind::Area {
                 prim,
                 two_sided: ts,
                 area: a,
                 ..
             } = world.lights[idx]
-            else {
-                unreachable!("shade_diffuse samples triangle area lights only")
-            };
-            let Shape::Triangle { p } = world.accel.shapes[prim as usize] else {
-                unreachable!("shade_diffuse samples triangle area lights only")
-            };
-            for (k, vk) in lv.iter_mut().enumerate() {
-                vk.set(i, p[k]);
+                && let Shape::Triangle { p } = world.accel.shapes[prim as usize]
+            {
+                for (k, vk) in lv.iter_mut().enumerate() {
+                    vk.set(i, p[k]);
+                }
+                nl.set(i, world.triangle_normal(prim));
+                (area[i], two_sided[i]) = (a, ts);
+            } else {
+                other |= 1 << i;
             }
-            nl.set(i, world.triangle_normal(prim));
-            (sel[i], area[i], two_sided[i], light[i]) = (s, a, ts, idx);
-            nee |= 1 << i;
         }
     }
     clock.lap(Stage::ShadeLightChoice);
@@ -309,6 +316,49 @@ pub(super) fn shade_diffuse(
             scale[l] = wil.z * w / pdf;
         }
     }
+    // The other lights' samples (point, spot, distant, infinite, area lights
+    // on spheres and disks), lane by lane, as `scatter` takes them.
+    for i in lanes(other) {
+        let frame = Frame {
+            s: fs.get(i),
+            t: ft.get(i),
+            n: ng_s.get(i),
+        };
+        let ls = world.sample_chosen_light(light[i], sel[i], pt.get(i), u1[i], u2[i]);
+        nee_ok[i] = false;
+        let Some(ls) = ls else { continue };
+        let wil = frame.to_local(ls.wi);
+        if !(wil.z > 0.0 && ls.wi.dot(frame.n) > 0.0) {
+            continue;
+        }
+        let origin = origin_front.get(i);
+        let (d, t) = match ls.target {
+            Some((pl, err_l, n_l)) => {
+                let tgt = if n_l == Vec3::ZERO {
+                    pl
+                } else {
+                    offset_ray_origin(pl, err_l, n_l, -ls.wi)
+                };
+                let dv = tgt - origin;
+                let len = dv.length();
+                if !(len > 0.0) {
+                    continue;
+                }
+                (dv / len, len * (1.0 - SHADOW_EPS))
+            }
+            None => (ls.wi, f32::INFINITY),
+        };
+        let pdf_b = wil.z / PI;
+        let w = if ls.delta {
+            1.0
+        } else {
+            power_heuristic(ls.pdf, pdf_b)
+        };
+        nee_ok[i] = true;
+        shadow_d.set(i, d);
+        tmax[i] = t;
+        scale[i] = wil.z * w * ls.scale / ls.pdf;
+    }
 
     clock.lap(Stage::ShadeNextEvent);
     // Per lane: the band vectors and the path's state.
@@ -320,9 +370,7 @@ pub(super) fn shade_diffuse(
             unreachable!("shade_diffuse is given Lambertian hits only (World::packet_shadable)")
         };
         if nee & (1 << i) != 0 && nee_ok[i] {
-            let LightKind::Area { le, .. } = &world.lights[light[i]] else {
-                unreachable!("shade_diffuse samples area lights only")
-            };
+            let le = world.light_spectrum(light[i]);
             let s = scale[i];
             for (((o, &b), &ri), &e) in pend[span.clone()]
                 .iter_mut()

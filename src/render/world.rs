@@ -86,9 +86,6 @@ pub struct World {
     /// Per primitive: a triangle with a Lambertian material and no shading
     /// normals, which `shade_packet` shades with the packet's other such hits.
     diffuse_tri: Vec<bool>,
-    /// Every light is an area light on a triangle (or there is none): what
-    /// `shade_packet`'s light sampling handles.
-    triangle_lights: bool,
     pub bsdfs: Vec<Bsdf>,
     pub lights: Vec<LightKind>,
     pub light_pmf: Vec<f32>,
@@ -458,14 +455,9 @@ impl World {
                     && matches!(bsdfs[i.material as usize], Bsdf::Diffuse { .. })
             })
             .collect();
-        let triangle_lights = lights.iter().all(|l| {
-            matches!(l, LightKind::Area { prim, .. }
-                if matches!(shapes[*prim as usize], Shape::Triangle { .. }))
-        });
         Ok(World {
             accel: Accel::build(shapes, kind),
             diffuse_tri,
-            triangle_lights,
             info,
             normals,
             tri_ng,
@@ -496,11 +488,10 @@ impl World {
     }
 
     /// Whether a hit on `prim` can be shaded by `shade_packet`: a Lambertian
-    /// triangle without shading normals, in a world whose lights are all
-    /// triangle area lights.
+    /// triangle without shading normals (lit by lights of any kind).
     #[inline(always)]
     pub(super) fn packet_shadable(&self, prim: u32) -> bool {
-        self.triangle_lights && self.diffuse_tri[prim as usize]
+        self.diffuse_tri[prim as usize]
     }
 
     /// Unit geometric normal of triangle primitive `prim`.
@@ -543,6 +534,21 @@ impl World {
         if !(sel > 0.0) {
             return None;
         }
+        self.sample_chosen_light(idx, sel, p, u1, u2)
+    }
+
+    /// `sample_light` once the light is chosen: light `idx`, selected with
+    /// probability `sel` (> 0), sampled from `p` with the remapped draw `u1`
+    /// and `u2`.
+    #[inline(always)]
+    pub(super) fn sample_chosen_light(
+        &self,
+        idx: usize,
+        sel: f32,
+        p: Vec3,
+        u1: f32,
+        u2: f32,
+    ) -> Option<LightSample<'_>> {
         match &self.lights[idx] {
             LightKind::Area {
                 prim,
@@ -665,6 +671,18 @@ impl World {
                     target: None,
                 })
             }
+        }
+    }
+
+    /// The spectrum of light `idx` that its samples reference
+    /// (`LightSample::spec`): radiance, intensity or irradiance by kind.
+    #[inline(always)]
+    pub(super) fn light_spectrum(&self, idx: usize) -> &[f32] {
+        match &self.lights[idx] {
+            LightKind::Area { le, .. } => le,
+            LightKind::Point { i, .. } | LightKind::Spot { i, .. } => i,
+            LightKind::Distant { e, .. } => e,
+            LightKind::Infinite { l } => l,
         }
     }
 
