@@ -1017,6 +1017,45 @@ mod tests {
         assert!(total(&lit.irradiance) > 1.2 * total(&plain.irradiance));
     }
 
+    /// The same on meshes with vertex normals: bent differently at each
+    /// vertex, so the shading normal is interpolated; on one wall turned
+    /// against the face (the shading normal is flipped to the geometric
+    /// side) and on another all zero (the geometric normal is used), as
+    /// `scatter` takes them.
+    #[test]
+    fn every_isa_level_renders_the_same_bits_with_vertex_normals() {
+        let (mut scene, film) = mitsuba_cornell_box();
+        let plain = every_level_renders(&scene, &film);
+        let bends = [
+            Vec3::new(0.3, 0.0, 0.1),
+            Vec3::new(-0.2, 0.25, 0.0),
+            Vec3::new(0.0, -0.15, 0.3),
+        ];
+        for (k, m) in scene.meshes.iter_mut().enumerate() {
+            if m.emission.is_some() {
+                continue;
+            }
+            let mut normals = vec![Vec3::ZERO; m.positions.len()];
+            for t in &m.indices {
+                let p = t.map(|i| m.positions[i as usize]);
+                let face = (p[1] - p[0]).cross(p[2] - p[0]).normalize();
+                for (j, &i) in t.iter().enumerate() {
+                    normals[i as usize] = match k % 3 {
+                        0 => (face + bends[j]).normalize(),
+                        1 => -(face + bends[j]).normalize(),
+                        _ => Vec3::ZERO,
+                    };
+                }
+            }
+            m.normals = Some(normals);
+        }
+        let bent = every_level_renders(&scene, &film);
+        assert!(
+            plain.irradiance != bent.irradiance,
+            "the vertex normals change the image"
+        );
+    }
+
     /// Render `scene`'s window (96, 16)–(128, 48) at every instruction set
     /// level, one path at a time and in packets, assert the images' bits are
     /// the same, and return the first.

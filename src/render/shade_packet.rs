@@ -11,10 +11,11 @@
 //! emission (only lanes that hit an emitter) and the band vectors
 //! (next-event contribution, throughput, Russian roulette).
 //!
-//! Which hits: a triangle with a `Diffuse` material and no shading normals,
-//! under lights of any kind (`World::packet_shadable`; before 2026-11-29
-//! only in worlds whose lights were all area lights on triangles, so the
-//! paper's figures with a spot light shaded every hit one lane at a time).
+//! Which hits: a triangle with a `Diffuse` material, with or without vertex
+//! normals, under lights of any kind (`World::packet_shadable`). Before
+//! 2026-11-29 only triangles without vertex normals in worlds whose lights
+//! were all area lights on triangles: the paper's Cornell box meshes carry
+//! normals, so its figures shaded every hit one lane at a time.
 //! Every other hit goes through
 //! `integrator::scatter` one lane at a time.
 //!
@@ -116,6 +117,10 @@ pub(super) fn shade_diffuse(
     ];
     let mut bary = [[1.0f32; LANES], [0.0; LANES], [0.0; LANES]];
     let mut ng = Lanes3::splat(Vec3::Z);
+    // The vertex normals of the lanes whose mesh has them (`has_n`).
+    let mut vn = [Lanes3::splat(Vec3::Z); 3];
+    let mut has_n = [false; LANES];
+    let mut with_normals: LaneMask = 0;
     let mut dir = Lanes3::splat(-Vec3::Z);
     // The bounce's draws, in `scatter`'s order.
     let (mut u1, mut u2) = ([0.5f32; LANES], [0.5f32; LANES]);
@@ -135,7 +140,16 @@ pub(super) fn shade_diffuse(
         }
         ng.set(i, world.triangle_normal(prim));
         dir.set(i, st[i].d);
-        if world.info[prim as usize].light != u32::MAX {
+        let info = world.info[prim as usize];
+        if info.normals != u32::MAX {
+            let n3 = world.normals[info.normals as usize];
+            for (k, vk) in vn.iter_mut().enumerate() {
+                vk.set(i, n3[k]);
+            }
+            has_n[i] = true;
+            with_normals |= 1 << i;
+        }
+        if info.light != u32::MAX {
             emitters |= 1 << i;
         }
         if st[i].depth >= max_bounces {
@@ -151,12 +165,38 @@ pub(super) fn shade_diffuse(
     }
 
     clock.lap(Stage::ShadeLanes);
+    // The shading normal, as `scatter` takes it: interpolated from the
+    // vertex normals and turned to the geometric normal's side, or the
+    // geometric normal (lanes without normals, or whose interpolation
+    // vanishes). Skipped when no lane has vertex normals.
+    let mut ns_lanes = Lanes3::splat(Vec3::Z);
+    let ns_src = if with_normals != 0 {
+        for l in 0..LANES {
+            let n = ng.get(l);
+            let ni =
+                (vn[0].get(l) * bary[0][l] + vn[1].get(l) * bary[1][l] + vn[2].get(l) * bary[2][l])
+                    .normalize_or_zero();
+            let interp = if ni.dot(n) < 0.0 { -ni } else { ni };
+            ns_lanes.set(
+                l,
+                if has_n[l] && ni != Vec3::ZERO {
+                    interp
+                } else {
+                    n
+                },
+            );
+        }
+        &ns_lanes
+    } else {
+        &ng
+    };
     // The hit, its frame, the BSDF sample and the continuation ray, all lanes;
     // with the ray's length and the cosine at the hit for emission.
     let mut pt = Lanes3::splat(Vec3::ZERO);
     let mut ng_s = Lanes3::splat(Vec3::Z);
     let mut fs = Lanes3::splat(Vec3::X);
     let mut ft = Lanes3::splat(Vec3::Y);
+    let mut fnrm = Lanes3::splat(Vec3::Z);
     let mut origin_front = Lanes3::splat(Vec3::ZERO);
     let mut next_o = Lanes3::splat(Vec3::ZERO);
     let mut next_d = Lanes3::splat(Vec3::Z);
@@ -175,9 +215,11 @@ pub(super) fn shade_diffuse(
         let wo_w = -d / dlen;
         let n = ng.get(l);
         let cos = n.dot(wo_w);
-        // Opaque: face the normal towards wo.
-        let n_s = if cos < 0.0 { -n } else { n };
-        let frame = Frame::from_normal(n_s);
+        // Opaque: face the normals towards wo (`n_s` geometric, the
+        // frame's the shading normal).
+        let nsh = ns_src.get(l);
+        let (n_s, ns_s) = if cos < 0.0 { (-n, -nsh) } else { (n, nsh) };
+        let frame = Frame::from_normal(ns_s);
         let wo = frame.to_local(wo_w);
         let front = offset_ray_origin(p, p_err, n_s, n_s);
         let wi = cosine_hemisphere(v1[l], v2[l]);
@@ -197,6 +239,7 @@ pub(super) fn shade_diffuse(
         ng_s.set(l, n_s);
         fs.set(l, frame.s);
         ft.set(l, frame.t);
+        fnrm.set(l, frame.n);
         origin_front.set(l, front);
         next_o.set(l, o_next);
         next_d.set(l, wi_w);
@@ -297,7 +340,7 @@ pub(super) fn shade_diffuse(
             let frame = Frame {
                 s: fs.get(l),
                 t: ft.get(l),
-                n: n_s,
+                n: fnrm.get(l),
             };
             let wil = frame.to_local(wi);
             let facing = wil.z > 0.0 && wi.dot(n_s) > 0.0;
@@ -322,13 +365,13 @@ pub(super) fn shade_diffuse(
         let frame = Frame {
             s: fs.get(i),
             t: ft.get(i),
-            n: ng_s.get(i),
+            n: fnrm.get(i),
         };
         let ls = world.sample_chosen_light(light[i], sel[i], pt.get(i), u1[i], u2[i]);
         nee_ok[i] = false;
         let Some(ls) = ls else { continue };
         let wil = frame.to_local(ls.wi);
-        if !(wil.z > 0.0 && ls.wi.dot(frame.n) > 0.0) {
+        if !(wil.z > 0.0 && ls.wi.dot(ng_s.get(i)) > 0.0) {
             continue;
         }
         let origin = origin_front.get(i);

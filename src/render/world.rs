@@ -83,8 +83,8 @@ pub struct World {
     /// shapes), computed once at build: the same operations as
     /// `Shape::surface`, so results are unchanged.
     tri_ng: Vec<Vec3>,
-    /// Per primitive: a triangle with a Lambertian material and no shading
-    /// normals, which `shade_packet` shades with the packet's other such hits.
+    /// Per primitive: a triangle with a Lambertian material, which
+    /// `shade_packet` shades with the packet's other such hits.
     diffuse_tri: Vec<bool>,
     pub bsdfs: Vec<Bsdf>,
     pub lights: Vec<LightKind>,
@@ -451,7 +451,6 @@ impl World {
             .zip(&info)
             .map(|(s, i)| {
                 matches!(s, Shape::Triangle { .. })
-                    && i.normals == u32::MAX
                     && matches!(bsdfs[i.material as usize], Bsdf::Diffuse { .. })
             })
             .collect();
@@ -488,7 +487,7 @@ impl World {
     }
 
     /// Whether a hit on `prim` can be shaded by `shade_packet`: a Lambertian
-    /// triangle without shading normals (lit by lights of any kind).
+    /// triangle (with or without vertex normals, lit by lights of any kind).
     #[inline(always)]
     pub(super) fn packet_shadable(&self, prim: u32) -> bool {
         self.diffuse_tri[prim as usize]
