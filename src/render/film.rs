@@ -1056,6 +1056,64 @@ mod tests {
         );
     }
 
+    /// The same with glossy surfaces beside Lambertian ones, so that a
+    /// packet mixes lanes shaded together (`shade_packet`) with lanes shaded
+    /// one by one (`scatter`): the red and white walls Lambertian with a
+    /// glossy lobe (the paper's walls), the green one a rough conductor,
+    /// every other mesh with bent vertex normals, under the area light and a
+    /// point light.
+    #[test]
+    fn every_isa_level_renders_the_same_bits_with_glossy_surfaces() {
+        use crate::scene::{Light, Material};
+        use crate::spectrum::Spectrum;
+        let (mut scene, film) = mitsuba_cornell_box();
+        let plain = every_level_renders(&scene, &film);
+        for nm in &mut scene.materials {
+            let glossy = match nm.name.as_str() {
+                "red" | "white" => {
+                    let Material::Diffuse { reflectance } = &nm.material else {
+                        continue;
+                    };
+                    Material::DiffuseSpecular {
+                        diffuse: reflectance.clone(),
+                        specular: reflectance.clone().scaled(0.5),
+                        roughness: 0.2,
+                    }
+                }
+                "green" => Material::Conductor {
+                    eta: Spectrum::constant("eta", 0.2),
+                    k: Spectrum::constant("k", 3.0),
+                    roughness: 0.3,
+                },
+                _ => continue,
+            };
+            nm.material = glossy;
+        }
+        let bend = Vec3::new(0.2, 0.1, -0.1);
+        for (k, m) in scene.meshes.iter_mut().enumerate() {
+            if k % 2 == 0 && m.emission.is_none() {
+                let n: Vec<Vec3> = (0..m.positions.len())
+                    .map(|j| {
+                        let t = &m.indices[0];
+                        let p = t.map(|i| m.positions[i as usize]);
+                        let face = (p[1] - p[0]).cross(p[2] - p[0]).normalize();
+                        (face + bend * j as f32).normalize()
+                    })
+                    .collect();
+                m.normals = Some(n);
+            }
+        }
+        scene.lights.push(Light::Point {
+            position: DVec3::new(0.3, 0.6, 0.2),
+            intensity: Spectrum::constant("point", 1.0),
+        });
+        let glossy = every_level_renders(&scene, &film);
+        assert!(
+            plain.irradiance != glossy.irradiance,
+            "the glossy surfaces change the image"
+        );
+    }
+
     /// Render `scene`'s window (96, 16)–(128, 48) at every instruction set
     /// level, one path at a time and in packets, assert the images' bits are
     /// the same, and return the first.
