@@ -12,7 +12,7 @@
 
 use super::accel::Hit;
 use super::geometry::offset_ray_origin;
-use super::path::{PathState, SHADOW_EPS, ShadowRay, add_emitted, add_scaled, roulette};
+use super::path::{PathState, ShadowRay, add_emitted, add_scaled, roulette};
 use super::ray_packet::{LANES, LaneMask, PacketHits, RayPacket, lanes};
 use super::sampler::Sampler;
 use super::sampling::{Frame, power_heuristic};
@@ -160,30 +160,7 @@ pub fn scatter(
     {
         let wi = frame.to_local(ls.wi);
         if wi.z > 0.0 && ls.wi.dot(ng_s) > 0.0 {
-            let origin = origin_front;
-            shadow = match ls.target {
-                Some((pl, err_l, nl)) => {
-                    let tgt = if nl == Vec3::ZERO {
-                        pl
-                    } else {
-                        offset_ray_origin(pl, err_l, nl, -ls.wi)
-                    };
-                    // Unit direction: obvhs' slab test clamps tiny inverse components,
-                    // which would misbehave for short unnormalised vectors (mm scenes).
-                    let dv = tgt - origin;
-                    let len = dv.length();
-                    (len > 0.0).then(|| ShadowRay {
-                        o: origin,
-                        d: dv / len,
-                        tmax: len * (1.0 - SHADOW_EPS),
-                    })
-                }
-                None => Some(ShadowRay {
-                    o: origin,
-                    d: ls.wi,
-                    tmax: f32::INFINITY,
-                }),
-            };
+            shadow = ShadowRay::towards(origin_front, &ls);
             // Tested here (one path: the BSDF is evaluated for unblocked
             // rays only) or later by the caller with the packet's other
             // shadow rays (the contribution waits in `pend`).
@@ -197,12 +174,7 @@ pub fn scatter(
             };
             if contributes {
                 let pdf_b = bsdf.eval(wo, wi, f);
-                let w = if ls.delta {
-                    1.0
-                } else {
-                    power_heuristic(ls.pdf, pdf_b)
-                };
-                let s = wi.z * w * ls.scale / ls.pdf;
+                let s = ls.next_event_scale(wi.z, pdf_b);
                 if let Some(pend) = pend {
                     for (((o, &b), &f), &e) in
                         pend.iter_mut().zip(beta.iter()).zip(f.iter()).zip(ls.spec)

@@ -5,8 +5,9 @@
 //! at a time (`integrator::scatter`) or a packet's diffuse hits together
 //! (`shade_packet`).
 
+use super::geometry::offset_ray_origin;
 use super::sampling::power_heuristic;
-use super::world::{LightKind, World};
+use super::world::{LightKind, LightSample, World};
 use glam::Vec3;
 
 /// Fraction of a shadow ray's length left untested at its far end, so it does
@@ -71,6 +72,40 @@ pub struct ShadowRay {
     pub o: Vec3,
     pub d: Vec3,
     pub tmax: f32,
+}
+
+impl ShadowRay {
+    /// The shadow ray from `origin` (already offset off the shading point's
+    /// surface) to light sample `ls`: to its point, offset off the light's
+    /// surface when it has one and stopped `SHADOW_EPS` short, or along its
+    /// direction without end (direction-only lights). `None` when the point
+    /// is the origin. The direction is a unit vector: obvhs' slab test clamps
+    /// tiny inverse components, which would misbehave for short unnormalised
+    /// vectors (mm scenes).
+    #[inline(always)]
+    pub(super) fn towards(origin: Vec3, ls: &LightSample<'_>) -> Option<ShadowRay> {
+        match ls.target {
+            Some((pl, err_l, nl)) => {
+                let tgt = if nl == Vec3::ZERO {
+                    pl
+                } else {
+                    offset_ray_origin(pl, err_l, nl, -ls.wi)
+                };
+                let dv = tgt - origin;
+                let len = dv.length();
+                (len > 0.0).then(|| ShadowRay {
+                    o: origin,
+                    d: dv / len,
+                    tmax: len * (1.0 - SHADOW_EPS),
+                })
+            }
+            None => Some(ShadowRay {
+                o: origin,
+                d: ls.wi,
+                tmax: f32::INFINITY,
+            }),
+        }
+    }
 }
 
 /// The path's ray hit area light `light` at distance `dist` (along the ray,

@@ -38,7 +38,7 @@
 
 use super::bsdf::Bsdf;
 use super::geometry::{HIT_POINT_GAMMA, Shape, offset_ray_origin, triangle_point};
-use super::path::{PathState, SHADOW_EPS, add_emitted, roulette};
+use super::path::{PathState, SHADOW_EPS, ShadowRay, add_emitted, roulette};
 use super::ray_packet::{LANES, LaneMask, PacketHits, RayPacket, lanes};
 use super::sampler::Sampler;
 use super::sampling::{Frame, cosine_hemisphere, power_heuristic, uniform_triangle};
@@ -374,33 +374,13 @@ pub(super) fn shade_diffuse(
         if !(wil.z > 0.0 && ls.wi.dot(ng_s.get(i)) > 0.0) {
             continue;
         }
-        let origin = origin_front.get(i);
-        let (d, t) = match ls.target {
-            Some((pl, err_l, n_l)) => {
-                let tgt = if n_l == Vec3::ZERO {
-                    pl
-                } else {
-                    offset_ray_origin(pl, err_l, n_l, -ls.wi)
-                };
-                let dv = tgt - origin;
-                let len = dv.length();
-                if !(len > 0.0) {
-                    continue;
-                }
-                (dv / len, len * (1.0 - SHADOW_EPS))
-            }
-            None => (ls.wi, f32::INFINITY),
-        };
-        let pdf_b = wil.z / PI;
-        let w = if ls.delta {
-            1.0
-        } else {
-            power_heuristic(ls.pdf, pdf_b)
+        let Some(r) = ShadowRay::towards(origin_front.get(i), &ls) else {
+            continue;
         };
         nee_ok[i] = true;
-        shadow_d.set(i, d);
-        tmax[i] = t;
-        scale[i] = wil.z * w * ls.scale / ls.pdf;
+        shadow_d.set(i, r.d);
+        tmax[i] = r.tmax;
+        scale[i] = ls.next_event_scale(wil.z, wil.z / PI);
     }
 
     clock.lap(Stage::ShadeNextEvent);

@@ -9,7 +9,7 @@
 use super::accel::{Accel, BvhKind};
 use super::bsdf::{Bsdf, mean};
 use super::geometry::{HIT_POINT_GAMMA, PrimHit, Shape, triangle_point};
-use super::sampling::{Frame, sample_cdf, uniform_sphere, uniform_triangle};
+use super::sampling::{Frame, power_heuristic, sample_cdf, uniform_sphere, uniform_triangle};
 use crate::scene::{Emission, Light, Material, Scene};
 use crate::spectrum::{Spectrum, WavelengthGrid};
 use crate::{Error, Result};
@@ -70,6 +70,22 @@ pub struct LightSample<'a> {
     pub delta: bool,
     /// Target point (area / point / spot) or None (direction-only lights).
     pub target: Option<(Vec3, Vec3, Vec3)>,
+}
+
+impl LightSample<'_> {
+    /// What multiplies `beta · f · spec` in a next-event estimate with this
+    /// sample: the cosine `cos_wi` at the shading point (shading frame), the
+    /// MIS weight against BSDF sampling of pdf `pdf_bsdf` (power heuristic;
+    /// 1 for a delta light) and the sample's `scale / pdf`.
+    #[inline(always)]
+    pub(super) fn next_event_scale(&self, cos_wi: f32, pdf_bsdf: f32) -> f32 {
+        let w = if self.delta {
+            1.0
+        } else {
+            power_heuristic(self.pdf, pdf_bsdf)
+        };
+        cos_wi * w * self.scale / self.pdf
+    }
 }
 
 /// The largest f32 below 1: where a remapped draw is clamped to stay in [0, 1).
