@@ -393,7 +393,7 @@ pub(super) fn shade_diffuse(
             unreachable!("shade_diffuse is given Lambertian hits only (World::packet_shadable)")
         };
         if nee & (1 << i) != 0 && nee_ok[i] {
-            let le = world.light_spectrum(light[i]);
+            let le = world.lights[light[i]].spectrum();
             let s = scale[i];
             for (((o, &b), &ri), &e) in pend[span.clone()]
                 .iter_mut()

@@ -57,6 +57,30 @@ pub enum LightKind {
     },
 }
 
+impl LightKind {
+    /// The light's spectrum, the one its samples reference
+    /// (`LightSample::spec`): radiance, intensity or irradiance by kind.
+    #[inline(always)]
+    pub(super) fn spectrum(&self) -> &[f32] {
+        match self {
+            LightKind::Area { le, .. } => le,
+            LightKind::Point { i, .. } | LightKind::Spot { i, .. } => i,
+            LightKind::Distant { e, .. } => e,
+            LightKind::Infinite { l } => l,
+        }
+    }
+
+    /// `spectrum`, to change (the bands' padding at build).
+    fn spectrum_mut(&mut self) -> &mut Vec<f32> {
+        match self {
+            LightKind::Area { le, .. } => le,
+            LightKind::Point { i, .. } | LightKind::Spot { i, .. } => i,
+            LightKind::Distant { e, .. } => e,
+            LightKind::Infinite { l } => l,
+        }
+    }
+}
+
 /// A light sample seen from a shading point. The incident spectral radiance
 /// (or irradiance, for delta lights) is `scale · spec`.
 pub struct LightSample<'a> {
@@ -447,13 +471,7 @@ impl World {
             b.pad_bands(nbp);
         }
         for l in &mut lights {
-            let v = match l {
-                LightKind::Area { le, .. } => le,
-                LightKind::Point { i, .. } | LightKind::Spot { i, .. } => i,
-                LightKind::Distant { e, .. } => e,
-                LightKind::Infinite { l } => l,
-            };
-            v.resize(nbp, 0.0);
+            l.spectrum_mut().resize(nbp, 0.0);
         }
         let tri_ng = shapes
             .iter()
@@ -686,18 +704,6 @@ impl World {
                     target: None,
                 })
             }
-        }
-    }
-
-    /// The spectrum of light `idx` that its samples reference
-    /// (`LightSample::spec`): radiance, intensity or irradiance by kind.
-    #[inline(always)]
-    pub(super) fn light_spectrum(&self, idx: usize) -> &[f32] {
-        match &self.lights[idx] {
-            LightKind::Area { le, .. } => le,
-            LightKind::Point { i, .. } | LightKind::Spot { i, .. } => i,
-            LightKind::Distant { e, .. } => e,
-            LightKind::Infinite { l } => l,
         }
     }
 
