@@ -795,8 +795,11 @@ mod tests {
         timing(b, s, sec, sh)
     }
 
-    /// Single-ray against packet queries on Cornell box bounces; prints ns
-    /// per ray (`cargo test --release --lib bvh4_packet -- --ignored --nocapture`).
+    /// Single-ray against packet queries on Cornell box bounces, in the order
+    /// drawn and sorted by `sorted_by_cell`; prints ns per ray (`cargo test
+    /// --release --lib bvh4_packet -- --ignored --nocapture`).
+    /// `bench/mitsuba_trace.sh` runs it beside Mitsuba's traversal of the same
+    /// kind of rays.
     #[test]
     #[ignore]
     #[cfg(target_arch = "x86_64")]
@@ -807,43 +810,78 @@ mod tests {
         let bvh = Bvh4::build(shapes).expect("shallow tree");
         let (sec, shadow) = bounce_rays(&world, &bvh, 1 << 14);
         let nrays = (sec.len() * LANES) as f64;
-        for isa in RenderIsa::ALL {
-            if !isa.supported() {
-                continue;
-            }
-            let mut best = [f64::INFINITY; 7];
-            for _ in 0..5 {
-                let t = match isa {
-                    RenderIsa::Sse => timing(&bvh, shapes, &sec, &shadow),
-                    // SAFETY: the CPU supports the features.
-                    RenderIsa::Avx2 => unsafe { timing_avx2(&bvh, shapes, &sec, &shadow) },
-                    // SAFETY: as above.
-                    RenderIsa::Avx512 => unsafe { timing_avx512(&bvh, shapes, &sec, &shadow) },
-                };
-                for k in 0..7 {
-                    best[k] = best[k].min(t[k]);
+        let by_key = (sorted_by_cell(&sec), sorted_by_cell(&shadow));
+        for (order, (sec, shadow)) in [
+            ("as drawn", (sec, shadow)),
+            ("sorted by octant and origin cell", by_key),
+        ] {
+            println!("rays {order}:");
+            let (sec, shadow) = (&sec[..], &shadow[..]);
+            for isa in RenderIsa::ALL {
+                if !isa.supported() {
+                    continue;
+                }
+                let mut best = [f64::INFINITY; 7];
+                for _ in 0..5 {
+                    let t = match isa {
+                        RenderIsa::Sse => timing(&bvh, shapes, sec, shadow),
+                        // SAFETY: the CPU supports the features.
+                        RenderIsa::Avx2 => unsafe { timing_avx2(&bvh, shapes, sec, shadow) },
+                        // SAFETY: as above.
+                        RenderIsa::Avx512 => unsafe { timing_avx512(&bvh, shapes, sec, shadow) },
+                    };
+                    for k in 0..7 {
+                        best[k] = best[k].min(t[k]);
+                    }
+                }
+                let ns = best.map(|s| s * 1e9 / nrays);
+                println!(
+                    "{:>8}: closest single {:.1} packet {:.1} ns/ray ({:.2}x); occlusion single {:.1} packet {:.1} ns/ray ({:.2}x)",
+                    isa.name(),
+                    ns[0],
+                    ns[1],
+                    ns[0] / ns[1],
+                    ns[2],
+                    ns[3],
+                    ns[2] / ns[3]
+                );
+                if isa == RenderIsa::Avx512 {
+                    println!(
+                        "  avx512 intrinsics kernel: closest packet {:.1} ns/ray ({:.2}x single), occlusion packet {:.1} ns/ray ({:.2}x)",
+                        ns[5],
+                        ns[0] / ns[5],
+                        ns[6],
+                        ns[2] / ns[6]
+                    );
                 }
             }
-            let ns = best.map(|s| s * 1e9 / nrays);
-            println!(
-                "{:>8}: closest single {:.1} packet {:.1} ns/ray ({:.2}x); occlusion single {:.1} packet {:.1} ns/ray ({:.2}x)",
-                isa.name(),
-                ns[0],
-                ns[1],
-                ns[0] / ns[1],
-                ns[2],
-                ns[3],
-                ns[2] / ns[3]
-            );
-            if isa == RenderIsa::Avx512 {
-                println!(
-                    "  avx512 intrinsics kernel: closest packet {:.1} ns/ray ({:.2}x single), occlusion packet {:.1} ns/ray ({:.2}x)",
-                    ns[5],
-                    ns[0] / ns[5],
-                    ns[6],
-                    ns[2] / ns[6]
-                );
+        }
+    }
+
+    /// The rays of `ps` repacked in the order of a key (stable): direction
+    /// octant, then origin cell of a 4 × 4 × 4 grid over [−1, 1]³ (the
+    /// Mitsuba box). `bench/mitsuba_trace.py` sorts its rays by the same key,
+    /// so the two traversals are timed on rays of the same coherence.
+    fn sorted_by_cell(ps: &[RayPacket]) -> Vec<RayPacket> {
+        let cell = |x: f32| (((x + 1.0) * 2.0) as i32).clamp(0, 3) as u32;
+        let mut v: Vec<(u32, Vec3, Vec3, f32)> = Vec::new();
+        for p in ps {
+            for l in 0..LANES {
+                let (o, d, t) = p.get(l);
+                let octant = (d.x < 0.0) as u32 + 2 * (d.y < 0.0) as u32 + 4 * (d.z < 0.0) as u32;
+                let key = octant * 64 + cell(o.x) * 16 + cell(o.y) * 4 + cell(o.z);
+                v.push((key, o, d, t));
             }
         }
+        v.sort_by_key(|x| x.0);
+        v.chunks(LANES)
+            .map(|ch| {
+                let mut p = RayPacket::default();
+                for (l, &(_, o, d, t)) in ch.iter().enumerate() {
+                    p.set(l, o, d, t);
+                }
+                p
+            })
+            .collect()
     }
 }
