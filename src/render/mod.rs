@@ -104,6 +104,7 @@ pub mod settings;
 mod shade_packet;
 pub mod simd;
 mod stages;
+mod triangle_lights;
 pub mod world;
 
 use crate::Result;

@@ -43,6 +43,7 @@ use super::ray_packet::{LANES, LaneMask, PacketHits, RayPacket, lanes};
 use super::sampler::Sampler;
 use super::sampling::{Frame, cosine_hemisphere, power_heuristic, uniform_triangle};
 use super::stages::{Clock, Stage};
+use super::triangle_lights::Chosen;
 use super::world::{LightKind, World};
 use glam::Vec3;
 use std::f32::consts::PI;
@@ -281,7 +282,38 @@ pub(super) fn shade_diffuse(
     // Lanes whose light is not an area light on a triangle: sampled one by
     // one after the lane loop below.
     let mut other: LaneMask = 0;
-    if !world.lights.is_empty() {
+    #[cfg(target_arch = "x86_64")]
+    let table = world.tri_lights.as_ref();
+    #[cfg(not(target_arch = "x86_64"))]
+    let table: Option<&()> = None;
+    if let Some(t) = table {
+        #[cfg(target_arch = "x86_64")]
+        {
+            let [l0, l1, l2] = &mut lv;
+            // SAFETY: the table is built only when the CPU has AVX-512
+            // (`World::build`).
+            nee |= unsafe {
+                t.choose_avx512(
+                    go,
+                    &wo_z,
+                    &mut u1,
+                    Chosen {
+                        light: &mut light,
+                        sel: &mut sel,
+                        v: [
+                            [&mut l0.x, &mut l0.y, &mut l0.z],
+                            [&mut l1.x, &mut l1.y, &mut l1.z],
+                            [&mut l2.x, &mut l2.y, &mut l2.z],
+                        ],
+                        ng: [&mut nl.x, &mut nl.y, &mut nl.z],
+                        area: &mut area,
+                        two_sided: &mut two_sided,
+                    },
+                )
+            };
+        }
+        let _ = t;
+    } else if !world.lights.is_empty() {
         for i in lanes(go) {
             if !(wo_z[i] > 0.0) {
                 continue;

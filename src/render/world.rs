@@ -10,6 +10,7 @@ use super::accel::{Accel, BvhKind};
 use super::bsdf::{Bsdf, mean};
 use super::geometry::{HIT_POINT_GAMMA, PrimHit, Shape, triangle_point};
 use super::sampling::{Frame, power_heuristic, sample_cdf, uniform_sphere, uniform_triangle};
+use super::simd::RenderIsa;
 use crate::scene::{Emission, Light, Material, Scene};
 use crate::spectrum::{Spectrum, WavelengthGrid};
 use crate::{Error, Result};
@@ -113,7 +114,20 @@ impl LightSample<'_> {
 }
 
 /// The largest f32 below 1: where a remapped draw is clamped to stay in [0, 1).
-const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
+pub(super) const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
+
+/// Draw `u` in the slice [`lo`, `hi`) of a cumulative table, remapped to
+/// [0, 1) (0 for an empty slice). `TriangleLights::choose_avx512` does the
+/// same with vectors.
+#[inline(always)]
+fn remap_in_slice(u: f32, lo: f32, hi: f32) -> f32 {
+    let width = hi - lo;
+    if width > 0.0 {
+        ((u - lo) / width).clamp(0.0, ONE_MINUS_EPSILON)
+    } else {
+        0.0
+    }
+}
 
 pub struct World {
     pub accel: Accel,
@@ -130,6 +144,9 @@ pub struct World {
     pub lights: Vec<LightKind>,
     pub light_pmf: Vec<f32>,
     pub(super) light_cdf: Vec<f32>,
+    /// The lights as one table, when all are area lights on triangles (at
+    /// most four) and the render kernel is AVX-512 (`shade_packet.rs`).
+    pub(super) tri_lights: Option<super::triangle_lights::TriangleLights>,
     pub infinite: Vec<u32>,
     pub center: Vec3,
     pub radius: f32,
@@ -473,13 +490,20 @@ impl World {
         for l in &mut lights {
             l.spectrum_mut().resize(nbp, 0.0);
         }
-        let tri_ng = shapes
+        let tri_ng: Vec<Vec3> = shapes
             .iter()
             .map(|s| match *s {
                 Shape::Triangle { p } => (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero(),
                 _ => Vec3::ZERO,
             })
             .collect();
+        let tri_lights = (RenderIsa::detect() == RenderIsa::Avx512)
+            .then(|| {
+                super::triangle_lights::TriangleLights::build(
+                    &lights, &light_pmf, &light_cdf, &shapes, &tri_ng,
+                )
+            })
+            .flatten();
         let diffuse_tri = shapes
             .iter()
             .zip(&info)
@@ -498,6 +522,7 @@ impl World {
             lights,
             light_pmf,
             light_cdf,
+            tri_lights,
             infinite,
             center,
             radius,
@@ -546,13 +571,11 @@ impl World {
         } else {
             self.light_cdf[idx - 1]
         };
-        let width = self.light_cdf[idx] - lo;
-        let u_rest = if width > 0.0 {
-            ((u - lo) / width).clamp(0.0, ONE_MINUS_EPSILON)
-        } else {
-            0.0
-        };
-        (idx, self.light_pmf[idx], u_rest)
+        (
+            idx,
+            self.light_pmf[idx],
+            remap_in_slice(u, lo, self.light_cdf[idx]),
+        )
     }
 
     /// Pick a light with draw `u1` and sample a direction to it from point
