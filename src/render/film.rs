@@ -195,6 +195,11 @@ pub fn render_world_at(
         packets: kernel.packets,
         in_flight: kernel.in_flight.max(1),
         rows_per_run,
+        isa: if kernel.isa.supported() {
+            kernel.isa
+        } else {
+            RenderIsa::Sse
+        },
     };
     let work = |r: RunSlices| job.run_at(kernel.isa, r);
 
@@ -314,6 +319,9 @@ struct RunJob<'a> {
     in_flight: usize,
     /// Rows of one job (`rows_per_run`).
     rows_per_run: usize,
+    /// The kernel's instruction set where this CPU has it, else the
+    /// baseline: what `shade_hits` may use beyond the compiler's vectors.
+    isa: RenderIsa,
 }
 
 impl RunJob<'_> {
@@ -706,7 +714,15 @@ impl RunJob<'_> {
             stream.intersect(world, &mut scs);
             clock.lap(Stage::ClosestHits);
             for (p, sc) in pk.iter_mut().zip(scs.iter_mut()) {
-                p.ended = shade_hits(world, &mut p.paths, p.alive, s.max_bounces, &mut p.smps, sc);
+                p.ended = shade_hits(
+                    world,
+                    self.isa,
+                    &mut p.paths,
+                    p.alive,
+                    s.max_bounces,
+                    &mut p.smps,
+                    sc,
+                );
             }
             clock.lap(Stage::Shade);
             stream.unoccluded(world, &scs, &mut unblocked);
@@ -1119,6 +1135,39 @@ mod tests {
     /// the same, and return the first.
     fn every_level_renders(scene: &crate::scene::Scene, film: &FilmSpec) -> OpticalImage {
         let cam = Pinhole::new(39.3077, 1.0, film).unwrap();
+        every_level_renders_with(scene, film, &cam)
+    }
+
+    /// A pinhole that says it is dispersive: every sample carries one band
+    /// (a hero band), as behind a real lens with dispersion.
+    struct HeroPinhole(Pinhole);
+    impl Camera for HeroPinhole {
+        fn sample_ray(&self, f: DVec2, u: DVec2, l: f64) -> Option<CameraRay> {
+            self.0.sample_ray(f, u, l)
+        }
+        fn is_dispersive(&self) -> bool {
+            true
+        }
+        fn describe(&self) -> String {
+            "hero-band test pinhole".into()
+        }
+    }
+
+    /// The same with one band per sample (a dispersive camera): its path's
+    /// throughput is one-hot and Russian roulette divides its largest band
+    /// by the band count.
+    #[test]
+    fn every_isa_level_renders_the_same_bits_with_hero_bands() {
+        let (scene, film) = mitsuba_cornell_box();
+        let cam = HeroPinhole(Pinhole::new(39.3077, 1.0, &film).unwrap());
+        every_level_renders_with(&scene, &film, &cam);
+    }
+
+    fn every_level_renders_with(
+        scene: &crate::scene::Scene,
+        film: &FilmSpec,
+        cam: &dyn Camera,
+    ) -> OpticalImage {
         let to_world = scene.camera.as_ref().map(|c| c.to_world).unwrap();
         let s = RenderSettings {
             spp: 40,
@@ -1143,7 +1192,7 @@ mod tests {
             .collect();
         let mut imgs: Vec<OpticalImage> = levels
             .iter()
-            .map(|&l| render_world_at(l, &world, &cam, &to_world, film, &s, vec![]).unwrap())
+            .map(|&l| render_world_at(l, &world, cam, &to_world, film, &s, vec![]).unwrap())
             .collect();
         let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         assert!(imgs[0].irradiance.iter().any(|&x| x > 0.0));

@@ -17,6 +17,7 @@ use super::ray_packet::{LANES, LaneMask, PacketHits, RayPacket, lanes};
 use super::sampler::Sampler;
 use super::sampling::{Frame, power_heuristic};
 use super::shade_packet::{LaneBands, shade_diffuse};
+use super::simd::RenderIsa;
 use super::world::{LightKind, World};
 use glam::Vec3;
 
@@ -342,10 +343,13 @@ pub fn packet_rays(st: &[PathState; LANES], alive: LaneMask, sc: &mut PacketScra
 /// A bounce's second step, once `sc.hits` holds the closest hits: shade the
 /// lanes `alive` — emission, next-event shadow rays into `sc.shadows` with
 /// their contributions pending, the next ray. Returns the lanes whose paths
-/// ended.
+/// ended. `isa`: the kernel's instruction set, whose own code
+/// `shade_diffuse` may take (AVX-512 intrinsics).
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 pub fn shade_hits(
     world: &World,
+    isa: RenderIsa,
     st: &mut [PathState; LANES],
     alive: LaneMask,
     max_bounces: u32,
@@ -399,6 +403,7 @@ pub fn shade_hits(
         };
         ended |= shade_diffuse(
             world,
+            isa,
             st,
             &sc.hits,
             together,

@@ -42,6 +42,7 @@ use super::path::{PathState, SHADOW_EPS, ShadowRay, add_emitted, roulette};
 use super::ray_packet::{LANES, LaneMask, PacketHits, RayPacket, lanes};
 use super::sampler::Sampler;
 use super::sampling::{Frame, cosine_hemisphere, power_heuristic, uniform_triangle};
+use super::simd::RenderIsa;
 use super::stages::{Clock, Stage};
 use super::triangle_lights::Chosen;
 use super::world::{LightKind, World};
@@ -77,6 +78,130 @@ impl Lanes3 {
         self.y[l] = v.y;
         self.z[l] = v.z;
     }
+    /// Component `a` (0 x, 1 y, 2 z) of every lane.
+    #[inline(always)]
+    fn axis(&self, a: usize) -> &[f32; LANES] {
+        match a {
+            0 => &self.x,
+            1 => &self.y,
+            _ => &self.z,
+        }
+    }
+}
+
+/// The lanes whose flag is set.
+#[inline(always)]
+fn lane_mask(flags: &[bool; LANES]) -> LaneMask {
+    let mut m: LaneMask = 0;
+    for (l, &f) in flags.iter().enumerate() {
+        m |= (f as LaneMask) << l;
+    }
+    m
+}
+
+/// `new` in the lanes of `m`, `old` in the others.
+#[inline(always)]
+fn masked(m: LaneMask, new: &[f32; LANES], old: &[f32; LANES]) -> [f32; LANES] {
+    let mut out = [0f32; LANES];
+    for l in 0..LANES {
+        out[l] = if m & (1 << l) != 0 { new[l] } else { old[l] };
+    }
+    out
+}
+
+/// Per lane what the AVX-512 band step reads beside the band vectors: the
+/// chosen light, the next-event scale, the BSDF sample's density and
+/// continuation ray, the roulette draw.
+#[cfg(target_arch = "x86_64")]
+struct Arrays<'a> {
+    light: &'a [usize; LANES],
+    scale: &'a [f32; LANES],
+    bsdf_pdf: &'a [f32; LANES],
+    u_rr: &'a [f32; LANES],
+    next_o: &'a Lanes3,
+    next_d: &'a Lanes3,
+}
+
+/// The band loop of `shade_diffuse` in the AVX-512 kernel: the path state
+/// of the lanes of `go` that continue (`cont`) moved to their next ray, then
+/// `diffuse_bands::step_avx512` for the band vectors and Russian roulette.
+/// Returns the lanes of `go` whose path ends.
+#[cfg(target_arch = "x86_64")]
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn bands_avx512(
+    world: &World,
+    st: &mut [PathState; LANES],
+    hits: &PacketHits,
+    go: LaneMask,
+    lit: LaneMask,
+    cont: LaneMask,
+    a: Arrays<'_>,
+    bands: LaneBands<'_>,
+) -> LaneMask {
+    use super::diffuse_bands::{Bands, RouletteLanes, step_avx512};
+    let LaneBands {
+        stride, beta, pend, ..
+    } = bands;
+    let live = go & cont;
+    let none: &[f32] = &[];
+    let (mut refl, mut emit) = ([none; LANES], [none; LANES]);
+    for i in lanes(go) {
+        let Bsdf::Diffuse { r } = &world.bsdfs[world.info[hits.prim[i] as usize].material as usize]
+        else {
+            unreachable!("shade_diffuse is given Lambertian hits only (World::packet_shadable)")
+        };
+        // Reflectances and light spectra are padded to `stride` bands
+        // (`World::build`); the slicing checks it.
+        refl[i] = &r[..stride];
+        emit[i] = if lit & (1 << i) != 0 {
+            &world.lights[a.light[i]].spectrum()[..stride]
+        } else {
+            refl[i]
+        };
+    }
+    let (mut eta, mut depth, mut rr_ref) = ([1f32; LANES], [0u32; LANES], [1f32; LANES]);
+    let mut hero: LaneMask = 0;
+    for i in lanes(live) {
+        let s = &mut st[i];
+        s.specular = false;
+        s.prev_pdf = a.bsdf_pdf[i];
+        s.o = a.next_o.get(i);
+        s.d = a.next_d.get(i);
+        s.depth += 1;
+        (eta[i], depth[i], rr_ref[i]) = (s.eta_scale, s.depth, s.rr_ref);
+        hero |= (s.hero.is_some() as LaneMask) << i;
+    }
+    // SAFETY: the caller runs the AVX-512 kernel; `lit` and `live` are
+    // lanes of `go`, whose band spans (`stride` each) and slices hold
+    // `stride` bands.
+    let dead = unsafe {
+        step_avx512(
+            go,
+            lit,
+            live,
+            Bands {
+                stride,
+                beta,
+                pend,
+                refl: &refl,
+                emit: &emit,
+                scale: a.scale,
+            },
+            RouletteLanes {
+                eta_scale: &eta,
+                depth: &depth,
+                rr_ref: &mut rr_ref,
+                u_rr: a.u_rr,
+                hero,
+                bands: world.bands,
+            },
+        )
+    };
+    for i in lanes(live) {
+        st[i].rr_ref = rr_ref[i];
+    }
+    (go & !cont) | dead
 }
 
 /// A packet's band vectors: lane `l`'s throughput, radiance and pending
@@ -96,6 +221,7 @@ pub(super) struct LaneBands<'a> {
 #[inline(always)]
 pub(super) fn shade_diffuse(
     world: &World,
+    isa: RenderIsa,
     st: &mut [PathState; LANES],
     hits: &PacketHits,
     todo: LaneMask,
@@ -283,15 +409,18 @@ pub(super) fn shade_diffuse(
     // one after the lane loop below.
     let mut other: LaneMask = 0;
     #[cfg(target_arch = "x86_64")]
-    let table = world.tri_lights.as_ref();
+    let table = world
+        .tri_lights
+        .as_ref()
+        .filter(|_| isa == RenderIsa::Avx512);
     #[cfg(not(target_arch = "x86_64"))]
     let table: Option<&()> = None;
     if let Some(t) = table {
         #[cfg(target_arch = "x86_64")]
         {
             let [l0, l1, l2] = &mut lv;
-            // SAFETY: the table is built only when the CPU has AVX-512
-            // (`World::build`).
+            // SAFETY: the kernel is AVX-512's (`shade_hits` is told so only
+            // when the CPU has it).
             nee |= unsafe {
                 t.choose_avx512(
                     go,
@@ -416,6 +545,40 @@ pub(super) fn shade_diffuse(
     }
 
     clock.lap(Stage::ShadeNextEvent);
+    let lit = nee & lane_mask(&nee_ok);
+    #[cfg(target_arch = "x86_64")]
+    if isa == RenderIsa::Avx512 {
+        ended |= bands_avx512(
+            world,
+            st,
+            hits,
+            go,
+            lit,
+            lane_mask(&cont),
+            Arrays {
+                light: &light,
+                scale: &scale,
+                bsdf_pdf: &bsdf_pdf,
+                u_rr: &u_rr,
+                next_o: &next_o,
+                next_d: &next_d,
+            },
+            LaneBands {
+                stride,
+                beta,
+                l: rad,
+                pend,
+            },
+        );
+        for a in 0..3 {
+            shadows.o[a] = masked(lit, origin_front.axis(a), &shadows.o[a]);
+            shadows.d[a] = masked(lit, shadow_d.axis(a), &shadows.d[a]);
+        }
+        shadows.tmax = masked(lit, &tmax, &shadows.tmax);
+        shadows.active |= lit;
+        clock.lap(Stage::ShadeBands);
+        return ended;
+    }
     // Per lane: the band vectors and the path's state.
     let nb = world.bands;
     for i in lanes(go) {
@@ -424,7 +587,7 @@ pub(super) fn shade_diffuse(
         else {
             unreachable!("shade_diffuse is given Lambertian hits only (World::packet_shadable)")
         };
-        if nee & (1 << i) != 0 && nee_ok[i] {
+        if lit & (1 << i) != 0 {
             let le = world.lights[light[i]].spectrum();
             let s = scale[i];
             for (((o, &b), &ri), &e) in pend[span.clone()]

@@ -234,7 +234,7 @@ mod tests {
     /// entries choose as `sample_cdf` does.
     #[test]
     fn every_lane_chooses_as_choose_light() {
-        if RenderIsa::detect() != RenderIsa::Avx512 {
+        if !RenderIsa::Avx512.supported() {
             eprintln!("skipped: no AVX-512");
             return;
         }

@@ -145,7 +145,8 @@ pub struct World {
     pub light_pmf: Vec<f32>,
     pub(super) light_cdf: Vec<f32>,
     /// The lights as one table, when all are area lights on triangles (at
-    /// most four) and the render kernel is AVX-512 (`shade_packet.rs`).
+    /// most four) and the CPU has AVX-512, for the AVX-512 kernel
+    /// (`shade_packet.rs`).
     pub(super) tri_lights: Option<super::triangle_lights::TriangleLights>,
     pub infinite: Vec<u32>,
     pub center: Vec3,
@@ -497,7 +498,8 @@ impl World {
                 _ => Vec3::ZERO,
             })
             .collect();
-        let tri_lights = (RenderIsa::detect() == RenderIsa::Avx512)
+        let tri_lights = RenderIsa::Avx512
+            .supported()
             .then(|| {
                 super::triangle_lights::TriangleLights::build(
                     &lights, &light_pmf, &light_cdf, &shapes, &tri_ng,
