@@ -90,7 +90,6 @@ pub mod bvh4;
 pub mod bvh4_packet;
 #[cfg(target_arch = "x86_64")]
 mod bvh4_packet_avx512;
-mod diffuse_bands;
 pub mod film;
 pub mod geometry;
 pub mod integrator;

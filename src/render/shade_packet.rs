@@ -78,130 +78,6 @@ impl Lanes3 {
         self.y[l] = v.y;
         self.z[l] = v.z;
     }
-    /// Component `a` (0 x, 1 y, 2 z) of every lane.
-    #[inline(always)]
-    fn axis(&self, a: usize) -> &[f32; LANES] {
-        match a {
-            0 => &self.x,
-            1 => &self.y,
-            _ => &self.z,
-        }
-    }
-}
-
-/// The lanes whose flag is set.
-#[inline(always)]
-fn lane_mask(flags: &[bool; LANES]) -> LaneMask {
-    let mut m: LaneMask = 0;
-    for (l, &f) in flags.iter().enumerate() {
-        m |= (f as LaneMask) << l;
-    }
-    m
-}
-
-/// `new` in the lanes of `m`, `old` in the others.
-#[inline(always)]
-fn masked(m: LaneMask, new: &[f32; LANES], old: &[f32; LANES]) -> [f32; LANES] {
-    let mut out = [0f32; LANES];
-    for l in 0..LANES {
-        out[l] = if m & (1 << l) != 0 { new[l] } else { old[l] };
-    }
-    out
-}
-
-/// Per lane what the AVX-512 band step reads beside the band vectors: the
-/// chosen light, the next-event scale, the BSDF sample's density and
-/// continuation ray, the roulette draw.
-#[cfg(target_arch = "x86_64")]
-struct Arrays<'a> {
-    light: &'a [usize; LANES],
-    scale: &'a [f32; LANES],
-    bsdf_pdf: &'a [f32; LANES],
-    u_rr: &'a [f32; LANES],
-    next_o: &'a Lanes3,
-    next_d: &'a Lanes3,
-}
-
-/// The band loop of `shade_diffuse` in the AVX-512 kernel: the path state
-/// of the lanes of `go` that continue (`cont`) moved to their next ray, then
-/// `diffuse_bands::step_avx512` for the band vectors and Russian roulette.
-/// Returns the lanes of `go` whose path ends.
-#[cfg(target_arch = "x86_64")]
-#[allow(clippy::too_many_arguments)]
-#[inline(always)]
-fn bands_avx512(
-    world: &World,
-    st: &mut [PathState; LANES],
-    hits: &PacketHits,
-    go: LaneMask,
-    lit: LaneMask,
-    cont: LaneMask,
-    a: Arrays<'_>,
-    bands: LaneBands<'_>,
-) -> LaneMask {
-    use super::diffuse_bands::{Bands, RouletteLanes, step_avx512};
-    let LaneBands {
-        stride, beta, pend, ..
-    } = bands;
-    let live = go & cont;
-    let none: &[f32] = &[];
-    let (mut refl, mut emit) = ([none; LANES], [none; LANES]);
-    for i in lanes(go) {
-        let Bsdf::Diffuse { r } = &world.bsdfs[world.info[hits.prim[i] as usize].material as usize]
-        else {
-            unreachable!("shade_diffuse is given Lambertian hits only (World::packet_shadable)")
-        };
-        // Reflectances and light spectra are padded to `stride` bands
-        // (`World::build`); the slicing checks it.
-        refl[i] = &r[..stride];
-        emit[i] = if lit & (1 << i) != 0 {
-            &world.lights[a.light[i]].spectrum()[..stride]
-        } else {
-            refl[i]
-        };
-    }
-    let (mut eta, mut depth, mut rr_ref) = ([1f32; LANES], [0u32; LANES], [1f32; LANES]);
-    let mut hero: LaneMask = 0;
-    for i in lanes(live) {
-        let s = &mut st[i];
-        s.specular = false;
-        s.prev_pdf = a.bsdf_pdf[i];
-        s.o = a.next_o.get(i);
-        s.d = a.next_d.get(i);
-        s.depth += 1;
-        (eta[i], depth[i], rr_ref[i]) = (s.eta_scale, s.depth, s.rr_ref);
-        hero |= (s.hero.is_some() as LaneMask) << i;
-    }
-    // SAFETY: the caller runs the AVX-512 kernel; `lit` and `live` are
-    // lanes of `go`, whose band spans (`stride` each) and slices hold
-    // `stride` bands.
-    let dead = unsafe {
-        step_avx512(
-            go,
-            lit,
-            live,
-            Bands {
-                stride,
-                beta,
-                pend,
-                refl: &refl,
-                emit: &emit,
-                scale: a.scale,
-            },
-            RouletteLanes {
-                eta_scale: &eta,
-                depth: &depth,
-                rr_ref: &mut rr_ref,
-                u_rr: a.u_rr,
-                hero,
-                bands: world.bands,
-            },
-        )
-    };
-    for i in lanes(live) {
-        st[i].rr_ref = rr_ref[i];
-    }
-    (go & !cont) | dead
 }
 
 /// A packet's band vectors: lane `l`'s throughput, radiance and pending
@@ -216,7 +92,9 @@ pub(super) struct LaneBands<'a> {
 /// Shade the hits of the lanes in `todo` (each `World::packet_shadable`):
 /// what `scatter` does for each of them, with the next-event shadow rays put
 /// in `shadows` and their contributions in `bands.pend`, as `scatter` does
-/// with a pending buffer. Returns the lanes whose paths ended.
+/// with a pending buffer. Returns the lanes whose paths ended. `isa`: the
+/// kernel's instruction set; the AVX-512 kernel chooses the lights of
+/// all lanes at once (`triangle_lights.rs`), the others lane by lane.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 pub(super) fn shade_diffuse(
@@ -545,40 +423,6 @@ pub(super) fn shade_diffuse(
     }
 
     clock.lap(Stage::ShadeNextEvent);
-    let lit = nee & lane_mask(&nee_ok);
-    #[cfg(target_arch = "x86_64")]
-    if isa == RenderIsa::Avx512 {
-        ended |= bands_avx512(
-            world,
-            st,
-            hits,
-            go,
-            lit,
-            lane_mask(&cont),
-            Arrays {
-                light: &light,
-                scale: &scale,
-                bsdf_pdf: &bsdf_pdf,
-                u_rr: &u_rr,
-                next_o: &next_o,
-                next_d: &next_d,
-            },
-            LaneBands {
-                stride,
-                beta,
-                l: rad,
-                pend,
-            },
-        );
-        for a in 0..3 {
-            shadows.o[a] = masked(lit, origin_front.axis(a), &shadows.o[a]);
-            shadows.d[a] = masked(lit, shadow_d.axis(a), &shadows.d[a]);
-        }
-        shadows.tmax = masked(lit, &tmax, &shadows.tmax);
-        shadows.active |= lit;
-        clock.lap(Stage::ShadeBands);
-        return ended;
-    }
     // Per lane: the band vectors and the path's state.
     let nb = world.bands;
     for i in lanes(go) {
@@ -587,7 +431,7 @@ pub(super) fn shade_diffuse(
         else {
             unreachable!("shade_diffuse is given Lambertian hits only (World::packet_shadable)")
         };
-        if lit & (1 << i) != 0 {
+        if nee & (1 << i) != 0 && nee_ok[i] {
             let le = world.lights[light[i]].spectrum();
             let s = scale[i];
             for (((o, &b), &ri), &e) in pend[span.clone()]
