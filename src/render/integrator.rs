@@ -14,7 +14,7 @@ use super::accel::Hit;
 use super::geometry::offset_ray_origin;
 use super::path::{PathState, ShadowRay, add_emitted, add_scaled, roulette};
 use super::ray_packet::{LANES, LaneMask, PacketHits, RayPacket, lanes};
-use super::sampler::Sampler;
+use super::sampler::{BounceDraws, Sampler};
 use super::sampling::{Frame, power_heuristic};
 use super::shade_packet::{LaneBands, shade_diffuse};
 use super::simd::RenderIsa;
@@ -148,10 +148,12 @@ pub fn scatter(
     // position from one 2-D point, lobe, direction, roulette) whether or not
     // it uses them, so draw k of every sample of a batch samples the same
     // dimension of the path (sampler.rs).
-    let (u1, u2) = smp.get2d();
-    let u_lobe = smp.get1d();
-    let (v1, v2) = smp.get2d();
-    let u_rr = smp.get1d();
+    let BounceDraws {
+        light: (u1, u2),
+        lobe: u_lobe,
+        dir: (v1, v2),
+        rr: u_rr,
+    } = smp.bounce_draws();
 
     // Next-event estimation: the contribution if the light is visible.
     let mut shadow = None;

@@ -242,6 +242,61 @@ impl Sampler {
     }
 }
 
+/// A bounce's four draws, in the order every bounce takes them (whether or
+/// not it uses them): the light choice and position from one 2-D point, the
+/// lobe, the BSDF direction, Russian roulette.
+#[derive(Clone, Copy, Debug)]
+pub struct BounceDraws {
+    pub light: (f32, f32),
+    pub lobe: f32,
+    pub dir: (f32, f32),
+    pub rr: f32,
+}
+
+impl Sampler {
+    /// Whether the next bounce's four draws all come from the scrambled
+    /// Sobol copies (then `bounce_draws_sobol` takes them).
+    #[inline(always)]
+    pub fn bounce_is_sobol(&self) -> bool {
+        self.draw + 4 <= self.ld_draws
+    }
+
+    /// The next bounce's four draws: what `get2d`, `get1d`, `get2d`,
+    /// `get1d` give in turn.
+    #[inline(always)]
+    pub fn bounce_draws(&mut self) -> BounceDraws {
+        if self.bounce_is_sobol() {
+            self.bounce_draws_sobol()
+        } else {
+            BounceDraws {
+                light: self.get2d(),
+                lobe: self.get1d(),
+                dir: self.get2d(),
+                rr: self.get1d(),
+            }
+        }
+    }
+
+    /// `bounce_draws` for a sampler whose `bounce_is_sobol()` holds, with no
+    /// branch: the packet kernel takes the draws of such lanes in a loop of
+    /// their own, so that lanes at different depths (some past `LD_DRAWS`)
+    /// do not cost a mispredicted branch each.
+    #[inline(always)]
+    pub fn bounce_draws_sobol(&mut self) -> BounceDraws {
+        debug_assert!(self.bounce_is_sobol());
+        // `draw` itself when `bounce_is_sobol()`; the bound keeps the
+        // reads in the arrays without a check.
+        let d = self.draw.min(LANES - 4);
+        self.draw = d + 4;
+        BounceDraws {
+            light: (self.x[d], self.y[d]),
+            lobe: self.x[d + 1],
+            dir: (self.x[d + 2], self.y[d + 2]),
+            rr: self.x[d + 3],
+        }
+    }
+}
+
 /// reverse(sobol1(i)): the XOR of the bit-reversed columns wⱼ (below) that
 /// the bits of `i` select. Bit k of wⱼ is C(j, k) mod 2, odd exactly when
 /// the bits of k are a subset of those of j (Lucas), so bit k of the result
@@ -531,5 +586,36 @@ mod tests {
         }
         let mut r = Rng::for_pixel_sample(key, 0);
         assert_eq!(s.get1d(), r.uniform());
+    }
+
+    /// A bounce's four draws taken at once are the draws taken one by one,
+    /// from every starting draw (before, across and past `LD_DRAWS`) and for
+    /// both kinds; `bounce_is_sobol` says exactly when all four are Sobol
+    /// points.
+    #[test]
+    fn bounce_draws_are_the_draws_one_by_one() {
+        let ld = BatchScramble::new(77, 1, 16);
+        for kind in [Some(&ld), None] {
+            for skip in 0..14 {
+                let mk = || {
+                    let mut s = Sampler::for_sample(kind, 77, 5, 9);
+                    for _ in 0..skip {
+                        s.get1d();
+                    }
+                    s
+                };
+                let (mut a, mut b) = (mk(), mk());
+                let sobol = a.bounce_is_sobol();
+                assert_eq!(sobol, kind.is_some() && skip + 4 <= LD_DRAWS);
+                let d = if sobol {
+                    a.bounce_draws_sobol()
+                } else {
+                    a.bounce_draws()
+                };
+                let want = (b.get2d(), b.get1d(), b.get2d(), b.get1d());
+                assert_eq!((d.light, d.lobe, d.dir, d.rr), want, "skip {skip}");
+                assert_eq!(a.get1d(), b.get1d(), "the draw after, skip {skip}");
+            }
+        }
     }
 }

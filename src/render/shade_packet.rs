@@ -134,6 +134,8 @@ pub(super) fn shade_diffuse(
     let mut ended: LaneMask = 0;
     let mut go: LaneMask = 0;
     let mut emitters: LaneMask = 0;
+    // Lanes whose bounce draws are all Sobol points (`Sampler::bounce_is_sobol`).
+    let mut sobol: LaneMask = 0;
     for i in lanes(todo) {
         let prim = hits.prim[i];
         let Shape::Triangle { p } = world.accel.shapes[prim as usize] else {
@@ -162,11 +164,17 @@ pub(super) fn shade_diffuse(
             continue;
         }
         go |= 1 << i;
-        let sm = &mut smp[i];
-        (u1[i], u2[i]) = sm.get2d();
-        let _u_lobe = sm.get1d();
-        (v1[i], v2[i]) = sm.get2d();
-        u_rr[i] = sm.get1d();
+        sobol |= (smp[i].bounce_is_sobol() as LaneMask) << i;
+    }
+    // The bounce's draws (the lobe's is taken and not used): the lanes
+    // whose draws are all Sobol points, then the others.
+    for i in lanes(go & sobol) {
+        let d = smp[i].bounce_draws_sobol();
+        ((u1[i], u2[i]), (v1[i], v2[i]), u_rr[i]) = (d.light, d.dir, d.rr);
+    }
+    for i in lanes(go & !sobol) {
+        let d = smp[i].bounce_draws();
+        ((u1[i], u2[i]), (v1[i], v2[i]), u_rr[i]) = (d.light, d.dir, d.rr);
     }
 
     clock.lap(Stage::ShadeLanes);
