@@ -16,6 +16,9 @@ pub fn mix64(mut z: u64) -> u64 {
     z ^ (z >> 31)
 }
 
+/// The largest f32 below 1: where a remapped draw is clamped to stay in [0, 1).
+pub(super) const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
+
 /// The top 24 bits of `x` as a float in [0, 1) (exactly representable).
 #[inline(always)]
 pub fn unit_f32(x: u32) -> f32 {

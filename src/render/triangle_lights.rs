@@ -20,9 +20,8 @@
 // The light loops index the table's per-light arrays and the masks together.
 #![allow(clippy::needless_range_loop)]
 
-use super::geometry::Shape;
 use super::ray_packet::{LANES, LaneMask};
-use super::world::LightKind;
+use super::sampling::ONE_MINUS_EPSILON;
 use glam::Vec3;
 
 /// At most this many lights go in the table.
@@ -41,6 +40,16 @@ pub(super) struct TriangleLights {
     two_sided: [bool; MAX_LIGHTS],
 }
 
+/// One area light on a triangle: its vertices, unit geometric normal,
+/// area and sidedness.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct TriangleLight {
+    pub v: [Vec3; 3],
+    pub ng: Vec3,
+    pub area: f32,
+    pub two_sided: bool,
+}
+
 /// Where `choose_avx512` writes, per lane: the light's index, selection
 /// probability, vertices (x, y, z columns of each), normal, area and
 /// sidedness. Lanes that sample no light keep what they held.
@@ -54,15 +63,13 @@ pub(super) struct Chosen<'a> {
 }
 
 impl TriangleLights {
-    /// The table, when every light is an area light on a triangle and there
-    /// are 1 to `MAX_LIGHTS` of them (`pmf`, `cdf`: the world's selection
-    /// table; `tri_ng`: each primitive's unit normal).
+    /// The table, when there are 1 to `MAX_LIGHTS` lights and every one is
+    /// a triangle light (`lights[k]` is `Some`; `pmf`, `cdf`: the world's
+    /// selection table).
     pub(super) fn build(
-        lights: &[LightKind],
+        lights: &[Option<TriangleLight>],
         pmf: &[f32],
         cdf: &[f32],
-        shapes: &[Shape],
-        tri_ng: &[Vec3],
     ) -> Option<Self> {
         let n = lights.len();
         if n == 0 || n > MAX_LIGHTS {
@@ -79,25 +86,14 @@ impl TriangleLights {
             two_sided: [false; MAX_LIGHTS],
         };
         for (k, l) in lights.iter().enumerate() {
-            let LightKind::Area {
-                prim,
-                two_sided,
-                area,
-                ..
-            } = *l
-            else {
-                return None;
-            };
-            let Shape::Triangle { p } = shapes[prim as usize] else {
-                return None;
-            };
+            let l = (*l)?;
             t.lo[k] = if k == 0 { 0.0 } else { cdf[k - 1] };
             t.hi[k] = cdf[k];
             t.pmf[k] = pmf[k];
-            t.v[k] = p;
-            t.ng[k] = tri_ng[prim as usize];
-            t.area[k] = area;
-            t.two_sided[k] = two_sided;
+            t.v[k] = l.v;
+            t.ng[k] = l.ng;
+            t.area[k] = l.area;
+            t.two_sided[k] = l.two_sided;
         }
         Some(t)
     }
@@ -155,7 +151,7 @@ impl TriangleLights {
             // when width > 0, else 0.
             let width = _mm512_sub_ps(hi, lo);
             let r = _mm512_div_ps(_mm512_sub_ps(u, lo), width);
-            let top = _mm512_set1_ps(super::world::ONE_MINUS_EPSILON);
+            let top = _mm512_set1_ps(ONE_MINUS_EPSILON);
             let r = _mm512_mask_mov_ps(r, _mm512_cmp_ps_mask::<_CMP_LT_OQ>(r, zero), zero);
             let r = _mm512_mask_mov_ps(r, _mm512_cmp_ps_mask::<_CMP_GT_OQ>(r, top), top);
             let rest = _mm512_maskz_mov_ps(_mm512_cmp_ps_mask::<_CMP_GT_OQ>(width, zero), r);
@@ -182,154 +178,6 @@ impl TriangleLights {
                 out.two_sided[l] = self.two_sided[k];
             }
             take as LaneMask
-        }
-    }
-}
-
-#[cfg(all(test, target_arch = "x86_64"))]
-mod tests {
-    use super::*;
-    use crate::render::BvhKind;
-    use crate::render::sampling::Rng;
-    use crate::render::simd::RenderIsa;
-    use crate::render::world::World;
-    use crate::scene::shapes::quad;
-    use crate::scene::{Emission, Material, Scene};
-    use crate::spectrum::{Spectrum, WavelengthGrid};
-    use glam::DVec3;
-
-    /// A world lit by one triangle light per entry of `radiances`, each half
-    /// of a unit square at its own height (odd ones two-sided).
-    fn lit(radiances: &[f64]) -> World {
-        let mut scene = Scene::default();
-        let m = scene.material(
-            "black",
-            Material::Diffuse {
-                reflectance: Spectrum::constant("zero", 0.0),
-            },
-        );
-        for (k, &le) in radiances.iter().enumerate() {
-            let o = scene.object(&format!("light{k}"));
-            let mut q = quad(
-                DVec3::new(0.0, 0.0, 1.0 + k as f64),
-                DVec3::X * (0.5 + 0.1 * k as f64),
-                DVec3::Y * 0.5,
-                m,
-                o,
-                Some(Emission {
-                    radiance: Spectrum::constant("le", le),
-                    two_sided: k % 2 == 1,
-                }),
-            );
-            q.indices.truncate(1);
-            scene.meshes.push(q);
-        }
-        let grid = WavelengthGrid::new(500.0, 600.0, 50.0).unwrap();
-        World::build(&scene, &grid, BvhKind::Bvh4).unwrap()
-    }
-
-    /// Every lane's choice equals `World::choose_light` and the light's own
-    /// triangle, normal, area and sidedness; lanes not asked, or whose light
-    /// has no probability, keep what they held; draws on the table's
-    /// entries choose as `sample_cdf` does.
-    #[test]
-    fn every_lane_chooses_as_choose_light() {
-        if !RenderIsa::Avx512.supported() {
-            eprintln!("skipped: no AVX-512");
-            return;
-        }
-        let mut rng = Rng::for_sample(5, 0, 0);
-        for radiances in [
-            vec![1.0],
-            vec![1.0, 3.0],
-            vec![2.0, 0.0, 5.0],
-            vec![1.0, 1.0, 0.5, 4.0],
-        ] {
-            let w = lit(&radiances);
-            let t = w
-                .tri_lights
-                .as_ref()
-                .expect("a table for 1 to 4 triangle lights");
-            for round in 0..200 {
-                let mut u1 = [0f32; LANES];
-                let mut wo_z = [1f32; LANES];
-                for l in 0..LANES {
-                    u1[l] = if round == 0 && l < w.light_cdf.len() {
-                        w.light_cdf[l]
-                    } else {
-                        rng.uniform()
-                    };
-                    if l % 5 == 3 {
-                        wo_z[l] = -0.5;
-                    }
-                }
-                let go: LaneMask = 0xFFFF & !(1 << 7);
-                let before = u1;
-                let (mut light, mut sel, mut area) =
-                    ([99usize; LANES], [-1f32; LANES], [-2f32; LANES]);
-                let mut v = [[[-3f32; LANES]; 3]; 3];
-                let mut ng = [[-4f32; LANES]; 3];
-                let mut ts = [true; LANES];
-                let [v0, v1, v2] = &mut v;
-                let [v0x, v0y, v0z] = v0;
-                let [v1x, v1y, v1z] = v1;
-                let [v2x, v2y, v2z] = v2;
-                let [nx, ny, nz] = &mut ng;
-                // SAFETY: AVX-512 checked above.
-                let took = unsafe {
-                    t.choose_avx512(
-                        go,
-                        &wo_z,
-                        &mut u1,
-                        Chosen {
-                            light: &mut light,
-                            sel: &mut sel,
-                            v: [[v0x, v0y, v0z], [v1x, v1y, v1z], [v2x, v2y, v2z]],
-                            ng: [nx, ny, nz],
-                            area: &mut area,
-                            two_sided: &mut ts,
-                        },
-                    )
-                };
-                for l in 0..LANES {
-                    let asked = go & (1 << l) != 0 && wo_z[l] > 0.0;
-                    if !asked {
-                        assert_eq!(u1[l].to_bits(), before[l].to_bits());
-                        assert_eq!(took & (1 << l), 0);
-                        assert_eq!(light[l], 99);
-                        continue;
-                    }
-                    let (idx, s, rest) = w.choose_light(before[l]);
-                    assert_eq!(u1[l].to_bits(), rest.to_bits(), "draw {}", before[l]);
-                    if !(s > 0.0) {
-                        assert_eq!(took & (1 << l), 0);
-                        assert_eq!((light[l], sel[l]), (99, -1.0));
-                        continue;
-                    }
-                    assert_ne!(took & (1 << l), 0);
-                    assert_eq!((light[l], sel[l].to_bits()), (idx, s.to_bits()));
-                    let LightKind::Area {
-                        prim,
-                        two_sided,
-                        area: a,
-                        ..
-                    } = w.lights[idx]
-                    else {
-                        unreachable!()
-                    };
-                    let Shape::Triangle { p } = w.accel.shapes[prim as usize] else {
-                        unreachable!()
-                    };
-                    for j in 0..3 {
-                        assert_eq!([v[j][0][l], v[j][1][l], v[j][2][l]], p[j].to_array());
-                    }
-                    assert_eq!(
-                        [ng[0][l], ng[1][l], ng[2][l]],
-                        w.triangle_normal(prim).to_array()
-                    );
-                    assert_eq!((area[l], ts[l]), (a, two_sided));
-                }
-            }
         }
     }
 }

@@ -9,8 +9,11 @@
 use super::accel::{Accel, BvhKind};
 use super::bsdf::{Bsdf, mean};
 use super::geometry::{HIT_POINT_GAMMA, PrimHit, Shape, triangle_point};
-use super::sampling::{Frame, power_heuristic, sample_cdf, uniform_sphere, uniform_triangle};
+use super::sampling::{
+    Frame, ONE_MINUS_EPSILON, power_heuristic, sample_cdf, uniform_sphere, uniform_triangle,
+};
 use super::simd::RenderIsa;
+use super::triangle_lights::{TriangleLight, TriangleLights};
 use crate::scene::{Emission, Light, Material, Scene};
 use crate::spectrum::{Spectrum, WavelengthGrid};
 use crate::{Error, Result};
@@ -113,9 +116,6 @@ impl LightSample<'_> {
     }
 }
 
-/// The largest f32 below 1: where a remapped draw is clamped to stay in [0, 1).
-pub(super) const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
-
 /// Draw `u` in the slice [`lo`, `hi`) of a cumulative table, remapped to
 /// [0, 1) (0 for an empty slice). `TriangleLights::choose_avx512` does the
 /// same with vectors.
@@ -147,7 +147,7 @@ pub struct World {
     /// The lights as one table, when all are area lights on triangles (at
     /// most four) and the CPU has AVX-512, for the AVX-512 kernel
     /// (`shade_packet.rs`).
-    pub(super) tri_lights: Option<super::triangle_lights::TriangleLights>,
+    pub(super) tri_lights: Option<TriangleLights>,
     pub infinite: Vec<u32>,
     pub center: Vec3,
     pub radius: f32,
@@ -501,9 +501,27 @@ impl World {
         let tri_lights = RenderIsa::Avx512
             .supported()
             .then(|| {
-                super::triangle_lights::TriangleLights::build(
-                    &lights, &light_pmf, &light_cdf, &shapes, &tri_ng,
-                )
+                let each: Vec<Option<TriangleLight>> = lights
+                    .iter()
+                    .map(|l| match *l {
+                        LightKind::Area {
+                            prim,
+                            two_sided,
+                            area,
+                            ..
+                        } => match shapes[prim as usize] {
+                            Shape::Triangle { p } => Some(TriangleLight {
+                                v: p,
+                                ng: tri_ng[prim as usize],
+                                area,
+                                two_sided,
+                            }),
+                            _ => None,
+                        },
+                        _ => None,
+                    })
+                    .collect();
+                TriangleLights::build(&each, &light_pmf, &light_cdf)
             })
             .flatten();
         let diffuse_tri = shapes
@@ -793,4 +811,155 @@ fn smooth_falloff(cos: f32, cos_total: f32, cos_start: f32) -> f32 {
     }
     let t = ((cos - cos_total) / (cos_start - cos_total)).clamp(0.0, 1.0);
     t * t * (3.0 - 2.0 * t)
+}
+
+#[cfg(all(test, target_arch = "x86_64"))]
+mod tests {
+    // The lane loops index the table's per-lane arrays together.
+    #![allow(clippy::needless_range_loop)]
+
+    use super::*;
+    use crate::render::BvhKind;
+    use crate::render::ray_packet::{LANES, LaneMask};
+    use crate::render::sampling::Rng;
+    use crate::render::triangle_lights::Chosen;
+    use crate::scene::shapes::quad;
+    use crate::scene::{Emission, Material, Scene};
+    use crate::spectrum::{Spectrum, WavelengthGrid};
+    use glam::DVec3;
+
+    /// A world lit by one triangle light per entry of `radiances`, each half
+    /// of a unit square at its own height (odd ones two-sided).
+    fn lit(radiances: &[f64]) -> World {
+        let mut scene = Scene::default();
+        let m = scene.material(
+            "black",
+            Material::Diffuse {
+                reflectance: Spectrum::constant("zero", 0.0),
+            },
+        );
+        for (k, &le) in radiances.iter().enumerate() {
+            let o = scene.object(&format!("light{k}"));
+            let mut q = quad(
+                DVec3::new(0.0, 0.0, 1.0 + k as f64),
+                DVec3::X * (0.5 + 0.1 * k as f64),
+                DVec3::Y * 0.5,
+                m,
+                o,
+                Some(Emission {
+                    radiance: Spectrum::constant("le", le),
+                    two_sided: k % 2 == 1,
+                }),
+            );
+            q.indices.truncate(1);
+            scene.meshes.push(q);
+        }
+        let grid = WavelengthGrid::new(500.0, 600.0, 50.0).unwrap();
+        World::build(&scene, &grid, BvhKind::Bvh4).unwrap()
+    }
+
+    /// Every lane's choice equals `World::choose_light` and the light's own
+    /// triangle, normal, area and sidedness; lanes not asked, or whose light
+    /// has no probability, keep what they held; draws on the table's
+    /// entries choose as `sample_cdf` does.
+    #[test]
+    fn every_lane_chooses_as_choose_light() {
+        if !RenderIsa::Avx512.supported() {
+            eprintln!("skipped: no AVX-512");
+            return;
+        }
+        let mut rng = Rng::for_sample(5, 0, 0);
+        for radiances in [
+            vec![1.0],
+            vec![1.0, 3.0],
+            vec![2.0, 0.0, 5.0],
+            vec![1.0, 1.0, 0.5, 4.0],
+        ] {
+            let w = lit(&radiances);
+            let t = w
+                .tri_lights
+                .as_ref()
+                .expect("a table for 1 to 4 triangle lights");
+            for round in 0..200 {
+                let mut u1 = [0f32; LANES];
+                let mut wo_z = [1f32; LANES];
+                for l in 0..LANES {
+                    u1[l] = if round == 0 && l < w.light_cdf.len() {
+                        w.light_cdf[l]
+                    } else {
+                        rng.uniform()
+                    };
+                    if l % 5 == 3 {
+                        wo_z[l] = -0.5;
+                    }
+                }
+                let go: LaneMask = 0xFFFF & !(1 << 7);
+                let before = u1;
+                let (mut light, mut sel, mut area) =
+                    ([99usize; LANES], [-1f32; LANES], [-2f32; LANES]);
+                let mut v = [[[-3f32; LANES]; 3]; 3];
+                let mut ng = [[-4f32; LANES]; 3];
+                let mut ts = [true; LANES];
+                let [v0, v1, v2] = &mut v;
+                let [v0x, v0y, v0z] = v0;
+                let [v1x, v1y, v1z] = v1;
+                let [v2x, v2y, v2z] = v2;
+                let [nx, ny, nz] = &mut ng;
+                // SAFETY: AVX-512 checked above.
+                let took = unsafe {
+                    t.choose_avx512(
+                        go,
+                        &wo_z,
+                        &mut u1,
+                        Chosen {
+                            light: &mut light,
+                            sel: &mut sel,
+                            v: [[v0x, v0y, v0z], [v1x, v1y, v1z], [v2x, v2y, v2z]],
+                            ng: [nx, ny, nz],
+                            area: &mut area,
+                            two_sided: &mut ts,
+                        },
+                    )
+                };
+                for l in 0..LANES {
+                    let asked = go & (1 << l) != 0 && wo_z[l] > 0.0;
+                    if !asked {
+                        assert_eq!(u1[l].to_bits(), before[l].to_bits());
+                        assert_eq!(took & (1 << l), 0);
+                        assert_eq!(light[l], 99);
+                        continue;
+                    }
+                    let (idx, s, rest) = w.choose_light(before[l]);
+                    assert_eq!(u1[l].to_bits(), rest.to_bits(), "draw {}", before[l]);
+                    if !(s > 0.0) {
+                        assert_eq!(took & (1 << l), 0);
+                        assert_eq!((light[l], sel[l]), (99, -1.0));
+                        continue;
+                    }
+                    assert_ne!(took & (1 << l), 0);
+                    assert_eq!((light[l], sel[l].to_bits()), (idx, s.to_bits()));
+                    let LightKind::Area {
+                        prim,
+                        two_sided,
+                        area: a,
+                        ..
+                    } = w.lights[idx]
+                    else {
+                        unreachable!()
+                    };
+                    let Shape::Triangle { p } = w.accel.shapes[prim as usize] else {
+                        unreachable!()
+                    };
+                    for j in 0..3 {
+                        assert_eq!([v[j][0][l], v[j][1][l], v[j][2][l]], p[j].to_array());
+                    }
+                    assert_eq!(
+                        [ng[0][l], ng[1][l], ng[2][l]],
+                        w.triangle_normal(prim).to_array()
+                    );
+                    assert_eq!((area[l], ts[l]), (a, two_sided));
+                }
+            }
+        }
+    }
 }
