@@ -201,7 +201,7 @@ pub fn render_world_at(
             RenderIsa::Sse
         },
     };
-    let work = |r: RunSlices| job.run_at(kernel.isa, r);
+    let work = |r: RunSlices| job.run_at(job.isa, r);
 
     let run = |img: &mut OpticalImage| -> Vec<(u64, Vec<f32>)> {
         img.irradiance
@@ -320,7 +320,8 @@ struct RunJob<'a> {
     /// Rows of one job (`rows_per_run`).
     rows_per_run: usize,
     /// The kernel's instruction set where this CPU has it, else the
-    /// baseline: what `shade_hits` may use beyond the compiler's vectors.
+    /// baseline: the copy `run_at` runs, and what `shade_hits` may use
+    /// beyond the compiler's vectors.
     isa: RenderIsa,
 }
 

@@ -294,40 +294,34 @@ pub(super) fn shade_diffuse(
     // Lanes whose light is not an area light on a triangle: sampled one by
     // one after the lane loop below.
     let mut other: LaneMask = 0;
-    #[cfg(target_arch = "x86_64")]
-    let table = world
-        .tri_lights
-        .as_ref()
-        .filter(|_| isa == RenderIsa::Avx512);
-    #[cfg(not(target_arch = "x86_64"))]
-    let table: Option<&()> = None;
-    if let Some(t) = table {
-        #[cfg(target_arch = "x86_64")]
-        {
+    // The AVX-512 kernel chooses for all lanes at once where the world has
+    // a table of triangle lights.
+    let chosen = match world.tri_lights.as_ref() {
+        Some(t) => {
             let [l0, l1, l2] = &mut lv;
-            // SAFETY: the kernel is AVX-512's (`shade_hits` is told so only
-            // when the CPU has it).
-            nee |= unsafe {
-                t.choose_avx512(
-                    go,
-                    &wo_z,
-                    &mut u1,
-                    Chosen {
-                        light: &mut light,
-                        sel: &mut sel,
-                        v: [
-                            [&mut l0.x, &mut l0.y, &mut l0.z],
-                            [&mut l1.x, &mut l1.y, &mut l1.z],
-                            [&mut l2.x, &mut l2.y, &mut l2.z],
-                        ],
-                        ng: [&mut nl.x, &mut nl.y, &mut nl.z],
-                        area: &mut area,
-                        two_sided: &mut two_sided,
-                    },
-                )
-            };
+            t.choose(
+                isa,
+                go,
+                &wo_z,
+                &mut u1,
+                Chosen {
+                    light: &mut light,
+                    sel: &mut sel,
+                    v: [
+                        [&mut l0.x, &mut l0.y, &mut l0.z],
+                        [&mut l1.x, &mut l1.y, &mut l1.z],
+                        [&mut l2.x, &mut l2.y, &mut l2.z],
+                    ],
+                    ng: [&mut nl.x, &mut nl.y, &mut nl.z],
+                    area: &mut area,
+                    two_sided: &mut two_sided,
+                },
+            )
         }
-        let _ = t;
+        None => None,
+    };
+    if let Some(took) = chosen {
+        nee |= took;
     } else if !world.lights.is_empty() {
         for i in lanes(go) {
             if !(wo_z[i] > 0.0) {

@@ -22,6 +22,7 @@
 
 use super::ray_packet::{LANES, LaneMask};
 use super::sampling::ONE_MINUS_EPSILON;
+use super::simd::RenderIsa;
 use glam::Vec3;
 
 /// At most this many lights go in the table.
@@ -63,16 +64,12 @@ pub(super) struct Chosen<'a> {
 }
 
 impl TriangleLights {
-    /// The table, when there are 1 to `MAX_LIGHTS` lights and every one is
-    /// a triangle light (`lights[k]` is `Some`; `pmf`, `cdf`: the world's
-    /// selection table).
-    pub(super) fn build(
-        lights: &[Option<TriangleLight>],
-        pmf: &[f32],
-        cdf: &[f32],
-    ) -> Option<Self> {
+    /// The table, when the CPU has AVX-512 (only its kernel uses the
+    /// table) and there are 1 to `MAX_LIGHTS` lights, every one a triangle
+    /// light (`pmf`, `cdf`: the world's selection table).
+    pub(super) fn build(lights: &[TriangleLight], pmf: &[f32], cdf: &[f32]) -> Option<Self> {
         let n = lights.len();
-        if n == 0 || n > MAX_LIGHTS {
+        if !RenderIsa::Avx512.supported() || n == 0 || n > MAX_LIGHTS {
             return None;
         }
         let mut t = TriangleLights {
@@ -86,7 +83,6 @@ impl TriangleLights {
             two_sided: [false; MAX_LIGHTS],
         };
         for (k, l) in lights.iter().enumerate() {
-            let l = (*l)?;
             t.lo[k] = if k == 0 { 0.0 } else { cdf[k - 1] };
             t.hi[k] = cdf[k];
             t.pmf[k] = pmf[k];
@@ -96,6 +92,27 @@ impl TriangleLights {
             t.two_sided[k] = l.two_sided;
         }
         Some(t)
+    }
+
+    /// `choose_avx512` when the kernel running is AVX-512's (`isa`);
+    /// `None` at every other level, whose kernel chooses lane by lane.
+    #[inline(always)]
+    pub(super) fn choose(
+        &self,
+        isa: RenderIsa,
+        go: LaneMask,
+        wo_z: &[f32; LANES],
+        u1: &mut [f32; LANES],
+        out: Chosen<'_>,
+    ) -> Option<LaneMask> {
+        #[cfg(target_arch = "x86_64")]
+        if isa == RenderIsa::Avx512 {
+            // SAFETY: a table is built only where the CPU has AVX-512
+            // (`build`).
+            return Some(unsafe { self.choose_avx512(go, wo_z, u1, out) });
+        }
+        let _ = (isa, go, wo_z, u1, out);
+        None
     }
 
     /// Choose the light of the lanes of `go` whose `wo_z` is positive, with

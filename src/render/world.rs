@@ -12,7 +12,6 @@ use super::geometry::{HIT_POINT_GAMMA, PrimHit, Shape, triangle_point};
 use super::sampling::{
     Frame, ONE_MINUS_EPSILON, power_heuristic, sample_cdf, uniform_sphere, uniform_triangle,
 };
-use super::simd::RenderIsa;
 use super::triangle_lights::{TriangleLight, TriangleLights};
 use crate::scene::{Emission, Light, Material, Scene};
 use crate::spectrum::{Spectrum, WavelengthGrid};
@@ -498,32 +497,28 @@ impl World {
                 _ => Vec3::ZERO,
             })
             .collect();
-        let tri_lights = RenderIsa::Avx512
-            .supported()
-            .then(|| {
-                let each: Vec<Option<TriangleLight>> = lights
-                    .iter()
-                    .map(|l| match *l {
-                        LightKind::Area {
-                            prim,
-                            two_sided,
-                            area,
-                            ..
-                        } => match shapes[prim as usize] {
-                            Shape::Triangle { p } => Some(TriangleLight {
-                                v: p,
-                                ng: tri_ng[prim as usize],
-                                area,
-                                two_sided,
-                            }),
-                            _ => None,
-                        },
-                        _ => None,
-                    })
-                    .collect();
-                TriangleLights::build(&each, &light_pmf, &light_cdf)
+        // Every light a triangle light, or no table.
+        let tri_lights = lights
+            .iter()
+            .map(|l| match *l {
+                LightKind::Area {
+                    prim,
+                    two_sided,
+                    area,
+                    ..
+                } => match shapes[prim as usize] {
+                    Shape::Triangle { p } => Some(TriangleLight {
+                        v: p,
+                        ng: tri_ng[prim as usize],
+                        area,
+                        two_sided,
+                    }),
+                    _ => None,
+                },
+                _ => None,
             })
-            .flatten();
+            .collect::<Option<Vec<_>>>()
+            .and_then(|each| TriangleLights::build(&each, &light_pmf, &light_cdf));
         let diffuse_tri = shapes
             .iter()
             .zip(&info)
@@ -822,6 +817,7 @@ mod tests {
     use crate::render::BvhKind;
     use crate::render::ray_packet::{LANES, LaneMask};
     use crate::render::sampling::Rng;
+    use crate::render::simd::RenderIsa;
     use crate::render::triangle_lights::Chosen;
     use crate::scene::shapes::quad;
     use crate::scene::{Emission, Material, Scene};
