@@ -679,7 +679,7 @@ fn dot_row_gives_the_same_bits_at_every_level() {
         .into_iter()
         .filter(|&l| l as u8 <= Isa::detect() as u8)
         .collect();
-    for nb in [3usize, 16, 31] {
+    for nb in [3usize, 15, 16, 17, 20, 31, 32, 33] {
         let n = 37;
         let w = vec![lcg_spectra(1, nb, 1), lcg_spectra(1, nb, 2)];
         let chans: Vec<u8> = (0..n).map(|c| (c % 2) as u8).collect();
@@ -699,9 +699,30 @@ fn dot_row_gives_the_same_bits_at_every_level() {
                 None => first = Some(bits),
                 Some(f) => assert_eq!(&bits, f, "{l:?}, {nb} bands"),
             }
-            let mut bad = irr.clone();
-            bad[(n - 1) * nb + nb / 2] = -1.0;
-            assert!(dot_row(l, &w, &chans, &bad, nb, &mut out), "{l:?}");
+            // An invalid spectrum anywhere (inside a block of 16 pixels or in
+            // the row's remainder, in its first or last bands) is reported: a
+            // negative band, NaN, infinity, or bands whose sum overflows.
+            for c in [0, 5, 15, 16, 31, 32, n - 1] {
+                for (k, x) in [
+                    (0, -1.0),
+                    (nb - 1, -1e-30),
+                    (nb / 2, f32::NAN),
+                    (nb - 1, f32::INFINITY),
+                ] {
+                    let mut bad = irr.clone();
+                    bad[c * nb + k] = x;
+                    assert!(
+                        dot_row(l, &w, &chans, &bad, nb, &mut out),
+                        "{l:?} {c} {k} {x}"
+                    );
+                }
+                let mut big = irr.clone();
+                big[c * nb..(c + 1) * nb].fill(3e38);
+                assert!(
+                    dot_row(l, &w, &chans, &big, nb, &mut out),
+                    "{l:?} {c} overflow"
+                );
+            }
         }
     }
 }
