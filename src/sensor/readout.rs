@@ -18,9 +18,11 @@
 //! the split changes no value.
 
 use super::config::SensorConfig;
+#[cfg(target_arch = "x86_64")]
+use super::rng::first_normals_avx512;
 use super::rng::{
-    LaneProposal, PixelRng, fast_round, ln_factorial_table, ptrs_after_first_all, ptrs_constants,
-    stream, ziggurat_x,
+    LaneProposal, PixelRng, ZIG_N, fast_round, first_normals, ln_factorial_table,
+    ptrs_after_first_all, ptrs_constants, stream, ziggurat_x,
 };
 use crate::optical_image::Rect;
 
@@ -161,6 +163,15 @@ impl Isa {
     }
 }
 
+/// Which scratch rows [`Readout::first_normals`] fills.
+#[derive(Clone, Copy)]
+enum NormalRows {
+    /// `gain` and `offset` (the fixed pattern's two normals).
+    Fpn,
+    /// `n1` and `n2` (read and reset noise).
+    Read,
+}
+
 /// Per-thread scratch rows of a [`Readout`].
 #[derive(Default)]
 pub struct Scratch {
@@ -173,6 +184,10 @@ pub struct Scratch {
     v: Vec<f64>,
     /// Per pixel: the vectorised first pass was enough.
     ok: Vec<bool>,
+    /// Per pixel: the first and second normal of a stream took the ziggurat's
+    /// common case ([`first_normals`]).
+    ok_a: Vec<bool>,
+    ok_b: Vec<bool>,
     /// The pixels whose first PTRS proposal failed the fast test (column
     /// indices), their means, and what `ptrs_after_first` made of them.
     slow: Vec<u32>,
@@ -194,8 +209,10 @@ impl Scratch {
             v.clear();
             v.resize(n, 0.0);
         }
-        self.ok.clear();
-        self.ok.resize(n, false);
+        for v in [&mut self.ok, &mut self.ok_a, &mut self.ok_b] {
+            v.clear();
+            v.resize(n, false);
+        }
     }
 }
 
@@ -313,18 +330,17 @@ impl Readout {
         }
         if self.use_prnu || self.use_dsnu {
             let (kf, prnu, dsnu) = (self.k_fpn, self.prnu, self.dsnu_v);
-            for (c, ((g, o), ok)) in s
+            // The two normals into `gain` and `offset`, then made gain and offset.
+            self.first_normals(zx, kf, gi0, s, NormalRows::Fpn);
+            for (((g, o), ok), (&ok1, &ok2)) in s
                 .gain
                 .iter_mut()
                 .zip(s.offset.iter_mut())
                 .zip(s.ok.iter_mut())
-                .enumerate()
+                .zip(s.ok_a.iter().zip(&s.ok_b))
             {
-                let gi = gi0 + c as u64;
-                let (n1, ok1) = PixelRng::normal_fast(PixelRng::keyed_output(kf, gi, 1), zx);
-                let (n2, ok2) = PixelRng::normal_fast(PixelRng::keyed_output(kf, gi, 2), zx);
-                *g = (1.0 + prnu * n1).max(0.0);
-                *o = dsnu * n2;
+                *g = (1.0 + prnu * *g).max(0.0);
+                *o *= dsnu;
                 *ok = ok1 & ok2;
             }
             for c in 0..n {
@@ -337,17 +353,8 @@ impl Readout {
             // read noise is the stream's first normal, reset noise its second,
             // so switching one off leaves the other's values unchanged
             let (kr, reset) = (self.k_read, self.use_reset);
-            for (c, ((a, b), ok)) in
-                s.n1.iter_mut()
-                    .zip(s.n2.iter_mut())
-                    .zip(s.ok.iter_mut())
-                    .enumerate()
-            {
-                let gi = gi0 + c as u64;
-                let (x1, ok1) = PixelRng::normal_fast(PixelRng::keyed_output(kr, gi, 1), zx);
-                let (x2, ok2) = PixelRng::normal_fast(PixelRng::keyed_output(kr, gi, 2), zx);
-                *a = x1;
-                *b = x2;
+            self.first_normals(zx, kr, gi0, s, NormalRows::Read);
+            for (ok, (&ok1, &ok2)) in s.ok.iter_mut().zip(s.ok_a.iter().zip(&s.ok_b)) {
                 *ok = ok1 & (ok2 | !reset);
             }
             for c in 0..n {
@@ -420,6 +427,33 @@ impl Readout {
                 *o = v as f32;
             }
         }
+    }
+
+    /// The first two normals of every pixel's stream `key` of the row starting at
+    /// full-frame index `gi0` ([`first_normals`]), into `gain` and `offset`
+    /// (`NormalRows::Fpn`) or `n1` and `n2` (`NormalRows::Read`), their acceptances into
+    /// `ok_a` and `ok_b`: eight pixels per instruction at the AVX-512 level.
+    #[inline(always)]
+    fn first_normals(
+        &self,
+        zx: &[f64; ZIG_N + 1],
+        key: u64,
+        gi0: u64,
+        s: &mut Scratch,
+        to: NormalRows,
+    ) {
+        let (a, b) = match to {
+            NormalRows::Fpn => (&mut s.gain, &mut s.offset),
+            NormalRows::Read => (&mut s.n1, &mut s.n2),
+        };
+        let (oa, ob) = (&mut s.ok_a, &mut s.ok_b);
+        #[cfg(target_arch = "x86_64")]
+        if self.isa == Isa::Avx512 {
+            // SAFETY: `isa` was detected on this CPU (Isa::detect).
+            unsafe { first_normals_avx512(zx, key, gi0, a, b, oa, ob) };
+            return;
+        }
+        first_normals(zx, key, gi0, a, b, oa, ob);
     }
 
     /// The photon counts whose first PTRS proposal failed the fast test: gathered,

@@ -1,0 +1,192 @@
+//! The first two normals of many pixels' streams at once (issue 17 item 5): for
+//! pixel `c` of a row, outputs 1 and 2 of the stream of (`stream_key`, `item0 + c`)
+//! through [`PixelRng::normal_fast`](super::PixelRng::normal_fast) — the fixed
+//! pattern's (PRNU, DSNU) and the read and reset noise's common case.
+//!
+//! Written as a plain loop ([`first_normals`]), the compiler vectorised it two
+//! lanes wide at best: the ziggurat's table lookups are gathers, which its cost
+//! model declines at AVX-512, so `camsim bench sensor` spent most of the readout's
+//! time in 128-bit code (perf annotate). [`first_normals_avx512`] takes eight
+//! pixels per instruction: SplitMix64 in 64-bit lanes (`vpmullq`), the table
+//! entries by `vgatherqpd`, and the same IEEE operations as `normal_fast` (exact
+//! conversion of the top 53 bits, the products and the difference, no fused
+//! multiply-add): the same bits
+//! (`first_normals_are_normal_fast_at_every_level`).
+
+use super::{GAMMA, PixelRng, ZIG_N};
+
+/// `(a[c], ok_a[c])`, `(b[c], ok_b[c])`: `normal_fast` of outputs 1 and 2 of the
+/// stream of (`stream_key`, `item0 + c`), for every `c` of `a` (all four the same
+/// length). `x_table` is [`ziggurat_x`](super::ziggurat_x).
+#[inline(always)]
+pub fn first_normals(
+    x_table: &[f64; ZIG_N + 1],
+    stream_key: u64,
+    item0: u64,
+    a: &mut [f64],
+    b: &mut [f64],
+    ok_a: &mut [bool],
+    ok_b: &mut [bool],
+) {
+    for (c, (((a, b), oa), ob)) in a
+        .iter_mut()
+        .zip(b.iter_mut())
+        .zip(ok_a.iter_mut())
+        .zip(ok_b.iter_mut())
+        .enumerate()
+    {
+        let item = item0 + c as u64;
+        (*a, *oa) = PixelRng::normal_fast(PixelRng::keyed_output(stream_key, item, 1), x_table);
+        (*b, *ob) = PixelRng::normal_fast(PixelRng::keyed_output(stream_key, item, 2), x_table);
+    }
+}
+
+/// [`first_normals`] eight pixels per instruction.
+///
+/// # Safety
+/// The CPU must have AVX-512F and AVX-512DQ (the readout's `Isa::Avx512`).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw,avx2,fma")]
+pub fn first_normals_avx512(
+    x_table: &[f64; ZIG_N + 1],
+    stream_key: u64,
+    item0: u64,
+    a: &mut [f64],
+    b: &mut [f64],
+    ok_a: &mut [bool],
+    ok_b: &mut [bool],
+) {
+    use std::arch::x86_64::*;
+    const W: usize = 8;
+    let n = a.len().min(b.len()).min(ok_a.len()).min(ok_b.len());
+    let whole = n / W * W;
+    let q = |v: u64| _mm512_set1_epi64(v as i64);
+    let (k_item, key) = (q(0xd1b5_4a32_d192_ed03), q(stream_key));
+    let (c1, c2) = (q(0xbf58_476d_1ce4_e5b9), q(0x94d0_49bb_1331_11eb));
+    let (g1, g2) = (q(GAMMA), q(GAMMA.wrapping_mul(2)));
+    let low8 = q(0xff);
+    let one_i = q(1);
+    let scale = _mm512_set1_pd(1.0 / (1u64 << 53) as f64);
+    let (two, one) = (_mm512_set1_pd(2.0), _mm512_set1_pd(1.0));
+    let mix = |z: __m512i| {
+        let z = _mm512_mullo_epi64(_mm512_xor_si512(z, _mm512_srli_epi64::<30>(z)), c1);
+        let z = _mm512_mullo_epi64(_mm512_xor_si512(z, _mm512_srli_epi64::<27>(z)), c2);
+        _mm512_xor_si512(z, _mm512_srli_epi64::<31>(z))
+    };
+    let table = x_table.as_ptr();
+    // (x, |x| < x_table[i + 1]) of one output per lane
+    let normal = |bits: __m512i| {
+        let i = _mm512_and_si512(bits, low8);
+        let top = _mm512_cvtepu64_pd(_mm512_srli_epi64::<11>(bits));
+        let u = _mm512_sub_pd(_mm512_mul_pd(two, _mm512_mul_pd(top, scale)), one);
+        // SAFETY: i ≤ 255, so i and i + 1 index the table's ZIG_N + 1 = 257 entries.
+        let (xi, xi1) = unsafe {
+            (
+                _mm512_i64gather_pd::<8>(i, table),
+                _mm512_i64gather_pd::<8>(_mm512_add_epi64(i, one_i), table),
+            )
+        };
+        let x = _mm512_mul_pd(u, xi);
+        (x, _mm512_cmp_pd_mask::<_CMP_LT_OQ>(_mm512_abs_pd(x), xi1))
+    };
+    let lanes = _mm512_setr_epi64(0, 1, 2, 3, 4, 5, 6, 7);
+    let mut c = 0;
+    while c < whole {
+        let item = _mm512_add_epi64(q(item0.wrapping_add(c as u64)), lanes);
+        let start = mix(_mm512_xor_si512(key, _mm512_mullo_epi64(item, k_item)));
+        let (xa, ma) = normal(mix(_mm512_add_epi64(start, g1)));
+        let (xb, mb) = normal(mix(_mm512_add_epi64(start, g2)));
+        // SAFETY: c + 8 ≤ whole ≤ n, the length of all four slices.
+        unsafe {
+            _mm512_storeu_pd(a.as_mut_ptr().add(c), xa);
+            _mm512_storeu_pd(b.as_mut_ptr().add(c), xb);
+        }
+        for j in 0..W {
+            ok_a[c + j] = ma & (1 << j) != 0;
+            ok_b[c + j] = mb & (1 << j) != 0;
+        }
+        c += W;
+    }
+    first_normals(
+        x_table,
+        stream_key,
+        item0.wrapping_add(whole as u64),
+        &mut a[whole..n],
+        &mut b[whole..n],
+        &mut ok_a[whole..n],
+        &mut ok_b[whole..n],
+    );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::ziggurat_x;
+    use super::*;
+
+    /// Every level gives `normal_fast`'s values and acceptances bit for bit, for
+    /// rows of every length around the vector width (tails included), at item
+    /// offsets across 2³² and near u64's end, and the draws are the streams'
+    /// (a fixed item's first normal is `PixelRng::normal`'s when accepted).
+    #[test]
+    fn first_normals_are_normal_fast_at_every_level() {
+        let zx = ziggurat_x();
+        for (key, item0) in [
+            (PixelRng::stream_key(3, 1), 0u64),
+            (PixelRng::stream_key(9, 4), (1 << 32) - 5),
+            (u64::MAX, u64::MAX - 40),
+        ] {
+            for n in [0usize, 1, 7, 8, 9, 16, 37] {
+                let want: Vec<_> = (0..n as u64)
+                    .map(|c| {
+                        let item = item0.wrapping_add(c);
+                        let x1 = PixelRng::normal_fast(PixelRng::keyed_output(key, item, 1), zx);
+                        let x2 = PixelRng::normal_fast(PixelRng::keyed_output(key, item, 2), zx);
+                        (x1.0.to_bits(), x1.1, x2.0.to_bits(), x2.1)
+                    })
+                    .collect();
+                let check = |a: &[f64], b: &[f64], oa: &[bool], ob: &[bool], level: &str| {
+                    for c in 0..n {
+                        let got = (a[c].to_bits(), oa[c], b[c].to_bits(), ob[c]);
+                        assert_eq!(got, want[c], "{level}: n {n}, pixel {c}");
+                    }
+                };
+                let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
+                let (mut oa, mut ob) = (vec![false; n], vec![false; n]);
+                first_normals(zx, key, item0, &mut a, &mut b, &mut oa, &mut ob);
+                check(&a, &b, &oa, &ob, "generic");
+                #[cfg(target_arch = "x86_64")]
+                if crate::sensor::readout::Isa::detect() == crate::sensor::readout::Isa::Avx512 {
+                    let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
+                    let (mut oa, mut ob) = (vec![true; n], vec![true; n]);
+                    // SAFETY: the CPU has AVX-512 (Isa::detect).
+                    unsafe {
+                        first_normals_avx512(zx, key, item0, &mut a, &mut b, &mut oa, &mut ob)
+                    };
+                    check(&a, &b, &oa, &ob, "avx512");
+                }
+            }
+        }
+        // The streams' own draws: an accepted first normal is `normal()`'s.
+        let key = PixelRng::stream_key(3, 1);
+        let (mut a, mut b) = (vec![0.0; 64], vec![0.0; 64]);
+        let (mut oa, mut ob) = (vec![false; 64], vec![false; 64]);
+        first_normals(zx, key, 100, &mut a, &mut b, &mut oa, &mut ob);
+        let mut rejected = 0;
+        for c in 0..64 {
+            let mut r = PixelRng::keyed(key, 100 + c as u64);
+            let x1 = r.normal();
+            if oa[c] {
+                assert_eq!(a[c].to_bits(), x1.to_bits(), "pixel {c}");
+                if ob[c] {
+                    assert_eq!(b[c].to_bits(), r.normal().to_bits(), "pixel {c}");
+                }
+            } else {
+                rejected += 1;
+            }
+        }
+        assert!(
+            rejected < 8,
+            "{rejected} of 64 first normals rejected (≈ 1 % expected)"
+        );
+    }
+}
