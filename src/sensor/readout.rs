@@ -21,7 +21,7 @@ use super::config::SensorConfig;
 #[cfg(target_arch = "x86_64")]
 use super::rng::first_normals_avx512;
 use super::rng::{
-    LaneProposal, PixelRng, ZIG_N, fast_round, first_normals, ln_factorial_table,
+    FirstNormals, LaneProposal, PixelRng, ZIG_N, fast_round, first_normals, ln_factorial_table,
     ptrs_after_first_all, ptrs_constants, stream, ziggurat_x,
 };
 use crate::optical_image::Rect;
@@ -442,18 +442,23 @@ impl Readout {
         s: &mut Scratch,
         to: NormalRows,
     ) {
-        let (a, b) = match to {
+        let (x1, x2) = match to {
             NormalRows::Fpn => (&mut s.gain, &mut s.offset),
             NormalRows::Read => (&mut s.n1, &mut s.n2),
         };
-        let (oa, ob) = (&mut s.ok_a, &mut s.ok_b);
+        let out = FirstNormals {
+            x1,
+            x2,
+            ok1: &mut s.ok_a,
+            ok2: &mut s.ok_b,
+        };
         #[cfg(target_arch = "x86_64")]
         if self.isa == Isa::Avx512 {
             // SAFETY: `isa` was detected on this CPU (Isa::detect).
-            unsafe { first_normals_avx512(zx, key, gi0, a, b, oa, ob) };
+            unsafe { first_normals_avx512(zx, key, gi0, out) };
             return;
         }
-        first_normals(zx, key, gi0, a, b, oa, ob);
+        first_normals(zx, key, gi0, out);
     }
 
     /// The photon counts whose first PTRS proposal failed the fast test: gathered,

@@ -15,24 +15,32 @@
 
 use super::{GAMMA, PixelRng, ZIG_N};
 
-/// `(a[c], ok_a[c])`, `(b[c], ok_b[c])`: `normal_fast` of outputs 1 and 2 of the
-/// stream of (`stream_key`, `item0 + c`), for every `c` of `a` (all four the same
-/// length). `x_table` is [`ziggurat_x`](super::ziggurat_x).
+/// Where [`first_normals`] puts a row's normals: pixel c's first normal and
+/// whether `normal_fast` accepted it in `x1[c]`, `ok1[c]`, its second in `x2[c]`,
+/// `ok2[c]` (the four rows of one length).
+pub struct FirstNormals<'a> {
+    pub x1: &'a mut [f64],
+    pub x2: &'a mut [f64],
+    pub ok1: &'a mut [bool],
+    pub ok2: &'a mut [bool],
+}
+
+/// `normal_fast` of outputs 1 and 2 of the stream of (`stream_key`, `item0 + c`)
+/// into `out` for every pixel `c` of its rows. `x_table` is
+/// [`ziggurat_x`](super::ziggurat_x).
 #[inline(always)]
 pub fn first_normals(
     x_table: &[f64; ZIG_N + 1],
     stream_key: u64,
     item0: u64,
-    a: &mut [f64],
-    b: &mut [f64],
-    ok_a: &mut [bool],
-    ok_b: &mut [bool],
+    out: FirstNormals<'_>,
 ) {
-    for (c, (((a, b), oa), ob)) in a
+    let FirstNormals { x1, x2, ok1, ok2 } = out;
+    for (c, (((a, b), oa), ob)) in x1
         .iter_mut()
-        .zip(b.iter_mut())
-        .zip(ok_a.iter_mut())
-        .zip(ok_b.iter_mut())
+        .zip(x2.iter_mut())
+        .zip(ok1.iter_mut())
+        .zip(ok2.iter_mut())
         .enumerate()
     {
         let item = item0 + c as u64;
@@ -51,13 +59,16 @@ pub fn first_normals_avx512(
     x_table: &[f64; ZIG_N + 1],
     stream_key: u64,
     item0: u64,
-    a: &mut [f64],
-    b: &mut [f64],
-    ok_a: &mut [bool],
-    ok_b: &mut [bool],
+    out: FirstNormals<'_>,
 ) {
     use std::arch::x86_64::*;
     const W: usize = 8;
+    let FirstNormals {
+        x1: a,
+        x2: b,
+        ok1: ok_a,
+        ok2: ok_b,
+    } = out;
     let n = a.len().min(b.len()).min(ok_a.len()).min(ok_b.len());
     let whole = n / W * W;
     let q = |v: u64| _mm512_set1_epi64(v as i64);
@@ -107,21 +118,28 @@ pub fn first_normals_avx512(
         }
         c += W;
     }
-    first_normals(
-        x_table,
-        stream_key,
-        item0.wrapping_add(whole as u64),
-        &mut a[whole..n],
-        &mut b[whole..n],
-        &mut ok_a[whole..n],
-        &mut ok_b[whole..n],
-    );
+    let rest = FirstNormals {
+        x1: &mut a[whole..n],
+        x2: &mut b[whole..n],
+        ok1: &mut ok_a[whole..n],
+        ok2: &mut ok_b[whole..n],
+    };
+    first_normals(x_table, stream_key, item0.wrapping_add(whole as u64), rest);
 }
 
 #[cfg(test)]
 mod tests {
     use super::super::ziggurat_x;
     use super::*;
+
+    fn rows<'a>(
+        x1: &'a mut [f64],
+        x2: &'a mut [f64],
+        ok1: &'a mut [bool],
+        ok2: &'a mut [bool],
+    ) -> FirstNormals<'a> {
+        FirstNormals { x1, x2, ok1, ok2 }
+    }
 
     /// Every level gives `normal_fast`'s values and acceptances bit for bit, for
     /// rows of every length around the vector width (tails included), at item
@@ -152,16 +170,15 @@ mod tests {
                 };
                 let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
                 let (mut oa, mut ob) = (vec![false; n], vec![false; n]);
-                first_normals(zx, key, item0, &mut a, &mut b, &mut oa, &mut ob);
+                first_normals(zx, key, item0, rows(&mut a, &mut b, &mut oa, &mut ob));
                 check(&a, &b, &oa, &ob, "generic");
                 #[cfg(target_arch = "x86_64")]
                 if crate::sensor::readout::Isa::detect() == crate::sensor::readout::Isa::Avx512 {
                     let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
                     let (mut oa, mut ob) = (vec![true; n], vec![true; n]);
+                    let out = rows(&mut a, &mut b, &mut oa, &mut ob);
                     // SAFETY: the CPU has AVX-512 (Isa::detect).
-                    unsafe {
-                        first_normals_avx512(zx, key, item0, &mut a, &mut b, &mut oa, &mut ob)
-                    };
+                    unsafe { first_normals_avx512(zx, key, item0, out) };
                     check(&a, &b, &oa, &ob, "avx512");
                 }
             }
@@ -170,7 +187,7 @@ mod tests {
         let key = PixelRng::stream_key(3, 1);
         let (mut a, mut b) = (vec![0.0; 64], vec![0.0; 64]);
         let (mut oa, mut ob) = (vec![false; 64], vec![false; 64]);
-        first_normals(zx, key, 100, &mut a, &mut b, &mut oa, &mut ob);
+        first_normals(zx, key, 100, rows(&mut a, &mut b, &mut oa, &mut ob));
         let mut rejected = 0;
         for c in 0..64 {
             let mut r = PixelRng::keyed(key, 100 + c as u64);
