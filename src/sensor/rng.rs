@@ -48,11 +48,16 @@ pub fn ptrs_constants(mu: f64) -> (f64, f64, f64, f64) {
     (a, b, bm2, 0.9277 * bm2 - 3.6224)
 }
 
+/// SplitMix64's finaliser: its two multipliers and three shifts (`mix64`;
+/// `first_normals_avx512` takes the same ones in vector lanes).
+const MIX_MUL: [u64; 2] = [0xbf58_476d_1ce4_e5b9, 0x94d0_49bb_1331_11eb];
+const MIX_SHIFT: [u32; 3] = [30, 27, 31];
+
 #[inline]
 fn mix64(mut z: u64) -> u64 {
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
+    z = (z ^ (z >> MIX_SHIFT[0])).wrapping_mul(MIX_MUL[0]);
+    z = (z ^ (z >> MIX_SHIFT[1])).wrapping_mul(MIX_MUL[1]);
+    z ^ (z >> MIX_SHIFT[2])
 }
 
 /// A small random stream for one (seed, source, item).
@@ -63,10 +68,13 @@ pub struct PixelRng {
 
 const GAMMA: u64 = 0x9e37_79b9_7f4a_7c15;
 
+/// What an item is multiplied by before it is mixed with its stream key.
+const ITEM_MUL: u64 = 0xd1b5_4a32_d192_ed03;
+
 /// The starting state of the stream of (`stream_key`, `item`).
 #[inline(always)]
 fn stream_start(stream_key: u64, item: u64) -> u64 {
-    mix64(stream_key ^ item.wrapping_mul(0xd1b5_4a32_d192_ed03))
+    mix64(stream_key ^ item.wrapping_mul(ITEM_MUL))
 }
 
 /// Output `n` (n ≥ 1) of the stream that starts at `start`.

@@ -13,7 +13,7 @@
 //! multiply-add): the same bits
 //! (`first_normals_are_normal_fast_at_every_level`).
 
-use super::{GAMMA, PixelRng, ZIG_N};
+use super::{GAMMA, ITEM_MUL, MIX_MUL, MIX_SHIFT, PixelRng, ZIG_N};
 
 /// Where [`first_normals`] puts a row's normals: pixel c's first normal and
 /// whether `normal_fast` accepted it in `x1[c]`, `ok1[c]`, its second in `x2[c]`,
@@ -72,17 +72,19 @@ pub fn first_normals_avx512(
     let n = a.len().min(b.len()).min(ok_a.len()).min(ok_b.len());
     let whole = n / W * W;
     let q = |v: u64| _mm512_set1_epi64(v as i64);
-    let (k_item, key) = (q(0xd1b5_4a32_d192_ed03), q(stream_key));
-    let (c1, c2) = (q(0xbf58_476d_1ce4_e5b9), q(0x94d0_49bb_1331_11eb));
+    let (k_item, key) = (q(ITEM_MUL), q(stream_key));
+    let (c1, c2) = (q(MIX_MUL[0]), q(MIX_MUL[1]));
     let (g1, g2) = (q(GAMMA), q(GAMMA.wrapping_mul(2)));
     let low8 = q(0xff);
     let one_i = q(1);
     let scale = _mm512_set1_pd(1.0 / (1u64 << 53) as f64);
     let (two, one) = (_mm512_set1_pd(2.0), _mm512_set1_pd(1.0));
     let mix = |z: __m512i| {
-        let z = _mm512_mullo_epi64(_mm512_xor_si512(z, _mm512_srli_epi64::<30>(z)), c1);
-        let z = _mm512_mullo_epi64(_mm512_xor_si512(z, _mm512_srli_epi64::<27>(z)), c2);
-        _mm512_xor_si512(z, _mm512_srli_epi64::<31>(z))
+        let s0 = _mm512_srli_epi64::<{ MIX_SHIFT[0] }>(z);
+        let z = _mm512_mullo_epi64(_mm512_xor_si512(z, s0), c1);
+        let s1 = _mm512_srli_epi64::<{ MIX_SHIFT[1] }>(z);
+        let z = _mm512_mullo_epi64(_mm512_xor_si512(z, s1), c2);
+        _mm512_xor_si512(z, _mm512_srli_epi64::<{ MIX_SHIFT[2] }>(z))
     };
     let table = x_table.as_ptr();
     // (x, |x| < x_table[i + 1]) of one output per lane
