@@ -327,25 +327,55 @@ fn ziggurat() -> &'static Ziggurat {
     })
 }
 
+/// 2⁵²: below it, adding and taking away 2⁵² of a value's sign rounds it to an
+/// integer exactly (floats in [2⁵², 2⁵³) are one apart).
+pub(super) const TWO52: f64 = 4_503_599_627_370_496.0;
+
+/// x rounded to an integer, ties to even, for |x| < 2⁵²; +0 (never −0) for a
+/// zero. The floor and truncation below start from it instead of from the
+/// truncating cast `x as i64`, which gives the same values there but saturates
+/// beyond i64's range, which LLVM lowers one lane at a time (a scalar
+/// conversion with two compares per lane): these few operations vectorise at
+/// every level.
+#[inline(always)]
+fn round_even_below_2_52(x: f64) -> f64 {
+    let m = TWO52.copysign(x);
+    (x + m) - m
+}
+
+/// ⌊x⌋ for |x| < 2⁵² (+0 for a zero); a finite value or NaN otherwise. Branch-free
+/// (one less where the rounding went up): the sign and fraction of x are data.
+#[inline(always)]
+pub(super) fn floor_below_2_52(x: f64) -> f64 {
+    let r = round_even_below_2_52(x);
+    r - f64::from(u8::from(r > x))
+}
+
+/// x truncated toward zero for |x| < 2⁵² (+0 for a zero): one nearer zero where
+/// the rounding went away from it.
+#[inline(always)]
+fn trunc_below_2_52(x: f64) -> f64 {
+    let r = round_even_below_2_52(x);
+    r - f64::from(u8::from(r.abs() > x.abs())).copysign(x)
+}
+
 /// floor(x) without a libm call on baseline x86-64 (no SSE4.1 `roundsd`): exact for
-/// |x| < 2^52, `f64::floor` otherwise.
+/// |x| < 2^52 (+0 for a zero), `f64::floor` otherwise.
 #[inline]
 pub fn fast_floor(x: f64) -> f64 {
-    if x.abs() < 4_503_599_627_370_496.0 {
-        let t = x as i64 as f64; // truncation toward zero, exact in this range
-        // branch-free (t − 1 or t − 0, both exact): the sign of x is data
-        t - f64::from(u8::from(t > x))
+    if x.abs() < TWO52 {
+        floor_below_2_52(x)
     } else {
         x.floor()
     }
 }
 
 /// round(x), halves away from zero (as `f64::round`), without a libm call: exact for
-/// |x| < 2^52, `f64::round` otherwise.
+/// |x| < 2^52 (+0 for a zero), `f64::round` otherwise.
 #[inline]
 pub fn fast_round(x: f64) -> f64 {
-    if x.abs() < 4_503_599_627_370_496.0 {
-        let t = x as i64 as f64;
+    if x.abs() < TWO52 {
+        let t = trunc_below_2_52(x);
         let f = x - t; // exact: |x| < 2^52
         // Branch-free: the fraction of a DV is noise, so a branch on it mispredicts
         // half the time. t is an integer-valued f64 (never −0), t ± 1 and t ± 0 are exact.
@@ -548,14 +578,37 @@ mod tests {
             f64::INFINITY,
             f64::NEG_INFINITY,
         ];
-        for &x in specials.iter().chain(
+        // Integers, halves (where ties to even go either way) and their
+        // neighbours, quarters, both signs, and values just under 2⁵².
+        let mut near = vec![1e-300, -1e-300, 0.3, -0.3, 0.7, -0.7];
+        for k in -40..=40 {
+            let h = k as f64 + 0.5;
+            near.extend([k as f64, h, k as f64 + 0.25, k as f64 - 0.25]);
+            near.extend([
+                f64::from_bits(h.to_bits() + 1),
+                f64::from_bits(h.to_bits() - 1),
+            ]);
+        }
+        for x in [TWO52 - 0.5, TWO52 - 1.0, TWO52 - 1.5, 2.5e15 + 0.5] {
+            near.extend([x, -x]);
+        }
+        for &x in specials.iter().chain(&near).chain(
             (0..100_000)
                 .map(|_| (r.uniform() - 0.5) * 2e4)
                 .collect::<Vec<_>>()
                 .iter(),
         ) {
-            assert_eq!(fast_floor(x), x.floor(), "floor {x}");
-            assert_eq!(fast_round(x), x.round(), "round {x}");
+            // Bit for bit, a zero as +0 (libm keeps −0: floor(−0), round(−0.3)).
+            assert_eq!(
+                fast_floor(x).to_bits(),
+                (x.floor() + 0.0).to_bits(),
+                "floor {x}"
+            );
+            assert_eq!(
+                fast_round(x).to_bits(),
+                (x.round() + 0.0).to_bits(),
+                "round {x}"
+            );
         }
         assert!(fast_floor(f64::NAN).is_nan() && fast_round(f64::NAN).is_nan());
     }

@@ -20,10 +20,10 @@
 //! proposal, a proposal beyond ±2⁵², a log-density of 0) is left to the exact
 //! path: 11 % of the draws that failed the fast test at μ = 6000, 25 % at μ = 10.
 
-use super::{ln_gamma_stirling, output_at, ptrs_constants, stream_start, uniform_from_bits};
-
-/// 2⁵²: below it, f64 truncation toward zero is exact.
-const TWO52: f64 = 4_503_599_627_370_496.0;
+use super::{
+    TWO52, floor_below_2_52, ln_gamma_stirling, output_at, ptrs_constants, stream_start,
+    uniform_from_bits,
+};
 
 /// ln x for positive normal finite x, within 10⁻¹⁵·max(1, |ln x|) of libm's
 /// (`ln_near_tracks_libm_over_every_binade`); NaN for any other x. Branch-free
@@ -58,7 +58,10 @@ fn ln_factorial_near(table: &[f64; 256], k: f64) -> f64 {
     let n = k + 1.0;
     let stirling = ln_gamma_stirling(n, ln_near(n));
     // Both read, one kept: a loop of these has no branch to vectorise around.
-    let tabled = table[usize::from(k.clamp(0.0, 255.0) as u8)];
+    // The entry: k (an integer wherever the result is used) clamped to 0…255
+    // is the low byte of k + 2⁵²'s bits; the cast `as u8` gave the same index
+    // but converted lane by lane.
+    let tabled = table[((k.clamp(0.0, 255.0) + TWO52).to_bits() & 0xff) as usize];
     if k < 256.0 { tabled } else { stirling }
 }
 
@@ -74,7 +77,7 @@ pub struct LaneProposal {
     v: f64,
     /// PTRS's fast acceptance test passed: `k` is the draw.
     pub fast: bool,
-    /// |x| < 2⁵², where truncation toward zero (the floor's first step) is exact.
+    /// |x| < 2⁵², where `k`, the floor of x, is exact.
     pub exact: bool,
 }
 
@@ -92,9 +95,8 @@ impl LaneProposal {
         let v = uniform_from_bits(output_at(start, n + 1));
         let us = 0.5 - u.abs();
         let x = (2.0 * a / us + b) * u + mu + 0.43;
-        let t = x as i64 as f64;
         LaneProposal {
-            k: t - f64::from(u8::from(t > x)),
+            k: floor_below_2_52(x),
             us,
             v,
             fast: (us >= 0.07) & (v * bm2 <= v_r),
