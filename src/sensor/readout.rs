@@ -18,12 +18,12 @@
 //! the split changes no value.
 
 use super::config::SensorConfig;
-#[cfg(target_arch = "x86_64")]
-use super::rng::first_normals_avx512;
 use super::rng::{
     FirstNormals, LaneProposal, PixelRng, ZIG_N, fast_round, first_normals, ln_factorial_table,
     ptrs_after_first_all, ptrs_constants, stream, ziggurat_x,
 };
+#[cfg(target_arch = "x86_64")]
+use super::rng::{first_normals_avx2, first_normals_avx512};
 use crate::optical_image::Rect;
 
 /// PRNU gain and DSNU offset (volts) of full-frame pixel index `gi`, as drawn
@@ -456,6 +456,12 @@ impl Readout {
         if self.isa == Isa::Avx512 {
             // SAFETY: `isa` was detected on this CPU (Isa::detect).
             unsafe { first_normals_avx512(zx, key, gi0, out) };
+            return;
+        }
+        #[cfg(target_arch = "x86_64")]
+        if self.isa == Isa::Avx2 {
+            // SAFETY: as above.
+            unsafe { first_normals_avx2(zx, key, gi0, out) };
             return;
         }
         first_normals(zx, key, gi0, out);

@@ -11,7 +11,11 @@
 //! entries by `vgatherqpd`, and the same IEEE operations as `normal_fast` (exact
 //! conversion of the top 53 bits, the products and the difference, no fused
 //! multiply-add): the same bits
-//! (`first_normals_are_normal_fast_at_every_level`).
+//! (`first_normals_are_normal_fast_at_every_level`). [`first_normals_avx2`] does
+//! the same four pixels per instruction with AVX2's 32-bit multiplies and an
+//! exact two-part conversion (`camsim bench sensor` at `CAMSIM_SENSOR_ISA=avx2`:
+//! 0.94–0.96 of the time before, docs/performance.md). Both share the block
+//! driver `in_blocks`.
 
 use super::{GAMMA, ITEM_MUL, MIX_MUL, MIX_SHIFT, PixelRng, ZIG_N};
 
@@ -49,6 +53,41 @@ pub fn first_normals(
     }
 }
 
+/// [`first_normals`] `W` pixels at a time: `block(item, x1, x2)` writes the
+/// normals of the `W` pixels from stream item `item` into `x1` and `x2` and
+/// returns their acceptances as lane masks (bit j for lane j); the pixels after
+/// the last whole block by the plain loop.
+#[inline(always)]
+fn in_blocks<const W: usize>(
+    x_table: &[f64; ZIG_N + 1],
+    stream_key: u64,
+    item0: u64,
+    out: FirstNormals<'_>,
+    mut block: impl FnMut(u64, &mut [f64], &mut [f64]) -> (u32, u32),
+) {
+    let FirstNormals { x1, x2, ok1, ok2 } = out;
+    let n = x1.len().min(x2.len()).min(ok1.len()).min(ok2.len());
+    let whole = n / W * W;
+    for c in (0..whole).step_by(W) {
+        let (m1, m2) = block(
+            item0.wrapping_add(c as u64),
+            &mut x1[c..c + W],
+            &mut x2[c..c + W],
+        );
+        for j in 0..W {
+            ok1[c + j] = m1 & (1 << j) != 0;
+            ok2[c + j] = m2 & (1 << j) != 0;
+        }
+    }
+    let rest = FirstNormals {
+        x1: &mut x1[whole..n],
+        x2: &mut x2[whole..n],
+        ok1: &mut ok1[whole..n],
+        ok2: &mut ok2[whole..n],
+    };
+    first_normals(x_table, stream_key, item0.wrapping_add(whole as u64), rest);
+}
+
 /// [`first_normals`] eight pixels per instruction.
 ///
 /// # Safety
@@ -63,14 +102,6 @@ pub fn first_normals_avx512(
 ) {
     use std::arch::x86_64::*;
     const W: usize = 8;
-    let FirstNormals {
-        x1: a,
-        x2: b,
-        ok1: ok_a,
-        ok2: ok_b,
-    } = out;
-    let n = a.len().min(b.len()).min(ok_a.len()).min(ok_b.len());
-    let whole = n / W * W;
     let q = |v: u64| _mm512_set1_epi64(v as i64);
     let (k_item, key) = (q(ITEM_MUL), q(stream_key));
     let (c1, c2) = (q(MIX_MUL[0]), q(MIX_MUL[1]));
@@ -103,30 +134,103 @@ pub fn first_normals_avx512(
         (x, _mm512_cmp_pd_mask::<_CMP_LT_OQ>(_mm512_abs_pd(x), xi1))
     };
     let lanes = _mm512_setr_epi64(0, 1, 2, 3, 4, 5, 6, 7);
-    let mut c = 0;
-    while c < whole {
-        let item = _mm512_add_epi64(q(item0.wrapping_add(c as u64)), lanes);
+    in_blocks::<W>(x_table, stream_key, item0, out, |item0, x1, x2| {
+        let item = _mm512_add_epi64(q(item0), lanes);
         let start = mix(_mm512_xor_si512(key, _mm512_mullo_epi64(item, k_item)));
         let (xa, ma) = normal(mix(_mm512_add_epi64(start, g1)));
         let (xb, mb) = normal(mix(_mm512_add_epi64(start, g2)));
-        // SAFETY: c + 8 ≤ whole ≤ n, the length of all four slices.
+        // SAFETY: `in_blocks` hands out W = 8 floats in each of x1 and x2.
         unsafe {
-            _mm512_storeu_pd(a.as_mut_ptr().add(c), xa);
-            _mm512_storeu_pd(b.as_mut_ptr().add(c), xb);
+            _mm512_storeu_pd(x1.as_mut_ptr(), xa);
+            _mm512_storeu_pd(x2.as_mut_ptr(), xb);
         }
-        for j in 0..W {
-            ok_a[c + j] = ma & (1 << j) != 0;
-            ok_b[c + j] = mb & (1 << j) != 0;
-        }
-        c += W;
-    }
-    let rest = FirstNormals {
-        x1: &mut a[whole..n],
-        x2: &mut b[whole..n],
-        ok1: &mut ok_a[whole..n],
-        ok2: &mut ok_b[whole..n],
+        (u32::from(ma), u32::from(mb))
+    });
+}
+
+/// [`first_normals`] four pixels per instruction with AVX2, where there is
+/// neither a 64-bit multiply nor a 64-bit integer to double conversion: the
+/// multiply from three 32×32-bit products (`vpmuludq`; the low 64 bits of the
+/// product, as `wrapping_mul`), the top 53 bits of an output converted as two
+/// exact halves (the high 21 bits and the low 32 bits, each put under an
+/// exponent and the exponent taken away, then added: exact below 2⁵³). The
+/// table entries by `vgatherqpd` and `normal_fast`'s IEEE operations as at
+/// AVX-512: the same bits.
+///
+/// # Safety
+/// The CPU must have AVX2 (the readout's `Isa::Avx2`).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+pub fn first_normals_avx2(
+    x_table: &[f64; ZIG_N + 1],
+    stream_key: u64,
+    item0: u64,
+    out: FirstNormals<'_>,
+) {
+    use std::arch::x86_64::*;
+    const W: usize = 4;
+    let q = |v: u64| _mm256_set1_epi64x(v as i64);
+    // The low 64 bits of z·m for a constant m (its high half `m >> 32`).
+    let mul = |z: __m256i, m: u64| {
+        let (m_lo, m_hi) = (q(m & 0xffff_ffff), q(m >> 32));
+        let lo = _mm256_mul_epu32(z, m_lo);
+        let cross = _mm256_add_epi64(
+            _mm256_mul_epu32(_mm256_srli_epi64::<32>(z), m_lo),
+            _mm256_mul_epu32(z, m_hi),
+        );
+        _mm256_add_epi64(lo, _mm256_slli_epi64::<32>(cross))
     };
-    first_normals(x_table, stream_key, item0.wrapping_add(whole as u64), rest);
+    let key = q(stream_key);
+    let (g1, g2) = (q(GAMMA), q(GAMMA.wrapping_mul(2)));
+    let low8 = q(0xff);
+    let one_i = q(1);
+    let scale = _mm256_set1_pd(1.0 / (1u64 << 53) as f64);
+    let (two, one) = (_mm256_set1_pd(2.0), _mm256_set1_pd(1.0));
+    let abs_mask = _mm256_castsi256_pd(q(0x7fff_ffff_ffff_ffff));
+    // 2⁵² and 2⁸⁴ as bit patterns, and their sum as a double.
+    let (e52, e84) = (q(0x4330_0000_0000_0000), q(0x4530_0000_0000_0000));
+    let e84_52 = _mm256_set1_pd((1u128 << 84) as f64 + (1u64 << 52) as f64);
+    let low32 = q(0xffff_ffff);
+    let mix = |z: __m256i| {
+        let s0 = _mm256_srli_epi64::<{ MIX_SHIFT[0] as i32 }>(z);
+        let z = mul(_mm256_xor_si256(z, s0), MIX_MUL[0]);
+        let s1 = _mm256_srli_epi64::<{ MIX_SHIFT[1] as i32 }>(z);
+        let z = mul(_mm256_xor_si256(z, s1), MIX_MUL[1]);
+        _mm256_xor_si256(z, _mm256_srli_epi64::<{ MIX_SHIFT[2] as i32 }>(z))
+    };
+    let table = x_table.as_ptr();
+    // (x, |x| < x_table[i + 1]) of one output per lane
+    let normal = |bits: __m256i| {
+        let i = _mm256_and_si256(bits, low8);
+        let top53 = _mm256_srli_epi64::<11>(bits);
+        let hi = _mm256_castsi256_pd(_mm256_or_si256(_mm256_srli_epi64::<32>(top53), e84));
+        let lo = _mm256_castsi256_pd(_mm256_or_si256(_mm256_and_si256(top53, low32), e52));
+        let top = _mm256_add_pd(_mm256_sub_pd(hi, e84_52), lo);
+        let u = _mm256_sub_pd(_mm256_mul_pd(two, _mm256_mul_pd(top, scale)), one);
+        // SAFETY: i ≤ 255, so i and i + 1 index the table's ZIG_N + 1 = 257 entries.
+        let (xi, xi1) = unsafe {
+            (
+                _mm256_i64gather_pd::<8>(table, i),
+                _mm256_i64gather_pd::<8>(table, _mm256_add_epi64(i, one_i)),
+            )
+        };
+        let x = _mm256_mul_pd(u, xi);
+        let ok = _mm256_cmp_pd::<_CMP_LT_OQ>(_mm256_and_pd(x, abs_mask), xi1);
+        (x, _mm256_movemask_pd(ok))
+    };
+    let lanes = _mm256_setr_epi64x(0, 1, 2, 3);
+    in_blocks::<W>(x_table, stream_key, item0, out, |item0, x1, x2| {
+        let item = _mm256_add_epi64(q(item0), lanes);
+        let start = mix(_mm256_xor_si256(key, mul(item, ITEM_MUL)));
+        let (xa, ma) = normal(mix(_mm256_add_epi64(start, g1)));
+        let (xb, mb) = normal(mix(_mm256_add_epi64(start, g2)));
+        // SAFETY: `in_blocks` hands out W = 4 floats in each of x1 and x2.
+        unsafe {
+            _mm256_storeu_pd(x1.as_mut_ptr(), xa);
+            _mm256_storeu_pd(x2.as_mut_ptr(), xb);
+        }
+        (ma as u32, mb as u32)
+    });
 }
 
 #[cfg(test)]
@@ -182,6 +286,15 @@ mod tests {
                     // SAFETY: the CPU has AVX-512 (Isa::detect).
                     unsafe { first_normals_avx512(zx, key, item0, out) };
                     check(&a, &b, &oa, &ob, "avx512");
+                }
+                #[cfg(target_arch = "x86_64")]
+                if crate::sensor::readout::Isa::detect() != crate::sensor::readout::Isa::Baseline {
+                    let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
+                    let (mut oa, mut ob) = (vec![true; n], vec![true; n]);
+                    let out = rows(&mut a, &mut b, &mut oa, &mut ob);
+                    // SAFETY: the CPU has AVX2 (Isa::detect above baseline).
+                    unsafe { first_normals_avx2(zx, key, item0, out) };
+                    check(&a, &b, &oa, &ob, "avx2");
                 }
             }
         }
