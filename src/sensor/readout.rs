@@ -90,7 +90,9 @@ pub struct Readout {
 
 /// The instruction set the row kernel is compiled for, chosen at run time: the same
 /// code, in which the compiler vectorises the first passes across pixels (8 lanes
-/// of u64/f64 with AVX-512, 4 with AVX2). Every lane does the scalar code's IEEE
+/// of u64/f64 with AVX-512, 4 with AVX2), except the first two normals of each
+/// pixel's streams, which have a hand-written kernel per level
+/// ([`first_normals_avx512`], [`first_normals_avx2`]). Every lane does the scalar code's IEEE
 /// operations (no fused multiply-add: Rust never contracts), so every level gives
 /// the same bits.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
