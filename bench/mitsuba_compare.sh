@@ -9,7 +9,8 @@
 #   CPU SIMD flags: <the flags of /proc/cpuinfo that decide the vector width>
 #   RATIO camsim/Mitsuba: paths/s … ; equal-time RMSE … ; CPU <model> (<vector width>), load …
 # (the vector width is avx512f, avx2+fma or sse: Mitsuba's LLVM back end runs 16,
-# 8 or 4 paths per instruction, so the ratio depends on it; quote it with the ratio).
+# 8 or 4 paths per instruction, so the ratio depends on it; quote it with the ratio;
+# the line ends with what Mitsuba's kernels were compiled for and how many lanes).
 # The method is documented in bench/mitsuba_compare.py and in
 # src/render/bench.rs (scene, spectra, compared quantity).
 #
@@ -30,7 +31,11 @@
 #   SAMPLER (camsim's sampler: sobol, the default, or independent);
 #   CAMSIM_RENDER_ISA=sse|avx2 (lower camsim's kernel) and CAMSIM_RENDER_PACKETS=0|1
 #   (one path / 16 paths at a time; default 16 at avx2 and avx512) pass through to
-#   camsim; the RATIO line names both.
+#   camsim; MITSUBA_ISA=avx2 has Dr.Jit compile Mitsuba's kernels as for an
+#   AVX2+FMA machine (8 lanes; native, the default, is the machine's widest;
+#   Dr.Jit has no SSE-only target). With both at avx2 the run stands in for an
+#   AVX2-only machine of the same clock and memory. The RATIO line names the
+#   levels of both renderers.
 set -euo pipefail
 SPP="${1:-32}"
 # shellcheck source=bench/mitsuba_env.sh
@@ -39,4 +44,4 @@ source "$(dirname "$0")/mitsuba_env.sh"
 exec "$VENV/bin/python" "$HERE/bench/mitsuba_compare.py" \
     --camsim "$CAMSIM" --cache "$BENCH_DIR" --spp "$SPP" \
     --ref-spp "${REF_SPP:-1024}" --camsim-conv-spp "${CONV_SPP:-256}" --seeds "${SEEDS:-4}" --threads 2 \
-    --batches "${BATCHES:-1}" --sampler "${SAMPLER:-sobol}"
+    --batches "${BATCHES:-1}" --sampler "${SAMPLER:-sobol}" --mitsuba-isa "${MITSUBA_ISA:-native}"

@@ -48,7 +48,7 @@ def main():
     load0 = os.getloadavg()[0]
     rows = []
     for d in depths:
-        mi, dr, variant, scene = mc.load_mitsuba(a.threads, max_depth=d)
+        mi, dr, variant, scene, _ = mc.load_mitsuba(a.threads, max_depth=d)
         mc.mitsuba_y(mi, dr, scene, a.spp, 0)
         tm = min(mc.mitsuba_y(mi, dr, scene, a.spp, s)[1] for s in range(1, a.repeats + 1))
         tc = min(camsim_s(a.camsim, a.spp, d - 1, s, a.threads) for s in range(1, a.repeats + 1))
