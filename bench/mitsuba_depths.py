@@ -41,6 +41,8 @@ def main():
     ap.add_argument("--depths", default="1,2,3,4,7", help="Mitsuba max_depth values (camsim: one less)")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--mitsuba-isa", default="native", choices=sorted(mc.MITSUBA_ISAS),
+                    help="what Dr.Jit compiles Mitsuba's kernels for (as mitsuba_compare.py)")
     a = ap.parse_args()
     depths = [int(x) for x in a.depths.split(",")]
     if not depths or min(depths) < 1 or depths != sorted(set(depths)):
@@ -48,14 +50,15 @@ def main():
     load0 = os.getloadavg()[0]
     rows = []
     for d in depths:
-        mi, dr, variant, scene, _ = mc.load_mitsuba(a.threads, max_depth=d)
+        mi, dr, variant, scene, target = mc.load_mitsuba(a.threads, max_depth=d, isa=a.mitsuba_isa)
         mc.mitsuba_y(mi, dr, scene, a.spp, 0)
         tm = min(mc.mitsuba_y(mi, dr, scene, a.spp, s)[1] for s in range(1, a.repeats + 1))
         tc = min(camsim_s(a.camsim, a.spp, d - 1, s, a.threads) for s in range(1, a.repeats + 1))
         rows.append((d, tm, tc))
     paths = mc.W * mc.H * a.spp
-    print(f"{mc.W}×{mc.H}, {a.spp} spp, {a.threads} threads, Mitsuba {mi.__version__} {variant}, "
-          f"camsim kernel {mc.CAMSIM_ISA[-1]}; least of {a.repeats} renders each")
+    mitsuba_kernel = f"{target[0]}, {target[1]} lanes" if target else "scalar"
+    print(f"{mc.W}×{mc.H}, {a.spp} spp, {a.threads} threads, Mitsuba {mi.__version__} {variant} "
+          f"(kernels for {mitsuba_kernel}), camsim kernel {mc.CAMSIM_ISA[-1]}; least of {a.repeats} renders each")
     print(f"{'Mitsuba max_depth':>17} {'camsim max_bounces':>18} {'Mitsuba s':>10} {'step':>7} "
           f"{'camsim s':>9} {'step':>7} {'camsim/Mitsuba':>15}")
     prev = (0.0, 0.0)
@@ -68,7 +71,8 @@ def main():
     print(f"CPU SIMD flags: {mc.machine_simd_flags()}")
     load = max(load0, os.getloadavg()[0])
     steps = ", ".join(f"d={d} {tc / tm:.3f}" for d, tm, tc in rows)
-    print(f"DEPTHS camsim/Mitsuba time: {steps}  [< 1 = camsim faster]; CPU {mc.machine_cpu()}, load {load:.1f}")
+    print(f"DEPTHS camsim/Mitsuba time: {steps}  [< 1 = camsim faster]; CPU {mc.machine_cpu()}, "
+          f"camsim kernel {mc.CAMSIM_ISA[-1]}, Mitsuba kernels for {mitsuba_kernel}, load {load:.1f}")
 
 
 if __name__ == "__main__":

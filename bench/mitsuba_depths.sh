@@ -6,11 +6,13 @@
 #
 # Usage: bench/mitsuba_depths.sh [SPP]   (default 32)
 # Environment: as mitsuba_compare.sh (bench/mitsuba_env.sh), and DEPTHS
-#   (default 1,2,3,4,7), REPEATS (3 renders each, the least kept).
+#   (default 1,2,3,4,7), REPEATS (3 renders each, the least kept); MITSUBA_ISA
+#   (native or avx2) and CAMSIM_RENDER_ISA as for mitsuba_compare.sh.
 set -euo pipefail
 SPP="${1:-32}"
 # shellcheck source=bench/mitsuba_env.sh
 source "$(dirname "$0")/mitsuba_env.sh"
 
 exec "$VENV/bin/python" "$HERE/bench/mitsuba_depths.py" --camsim "$CAMSIM" --spp "$SPP" \
-    --depths "${DEPTHS:-1,2,3,4,7}" --repeats "${REPEATS:-3}" --threads 2
+    --depths "${DEPTHS:-1,2,3,4,7}" --repeats "${REPEATS:-3}" --threads 2 \
+    --mitsuba-isa "${MITSUBA_ISA:-native}"
