@@ -87,14 +87,24 @@ def mitsuba_llvm_target(dr, isa):
     builds a scene, and a later change crashes it) and return what Dr.Jit now
     compiles for: (target CPU, vector width)."""
     import ctypes
-    core = _drjit_core(dr)
-    cpu = core._Z19jit_llvm_target_cpuv
+    # The C++ names of Dr.Jit 1.x's core library; another Dr.Jit may lack them.
+    try:
+        core = _drjit_core(dr)
+        cpu = core._Z19jit_llvm_target_cpuv
+        width = core._Z21jit_llvm_vector_widthv
+        set_target = core._Z19jit_llvm_set_targetPKcS0_j
+    except (OSError, AttributeError) as e:
+        if isa != "native":
+            sys.exit(f"--mitsuba-isa {isa}: this Dr.Jit ({dr.__version__}) has no jit_llvm_set_target to call ({e})")
+        print(f"note: cannot ask Dr.Jit {dr.__version__} what it compiles for ({e})", file=sys.stderr)
+        return "unknown target", "?"
     cpu.restype = ctypes.c_char_p
-    width = core._Z21jit_llvm_vector_widthv
     width.restype = ctypes.c_uint32
     target = MITSUBA_ISAS[isa]
     if target is not None:
-        set_target = core._Z19jit_llvm_set_targetPKcS0_j
+        have = machine_simd_flags().split()
+        if not {"avx2", "fma"} <= set(have):
+            sys.exit(f"--mitsuba-isa {isa}: this CPU lacks AVX2+FMA (SIMD flags: {' '.join(have)})")
         set_target.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_uint32]
         set_target(*target)
         if width() != target[2]:
