@@ -315,17 +315,33 @@ fn dot_row(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw,avx2,fma,bmi2")]
 fn dot_row_avx512(w: &[Vec<f32>], chans: &[u8], irr: &[f32], nb: usize, out: &mut [f32]) -> bool {
-    // Whole blocks of 16 pixels reduced together (16–32 bands), the rest as at
-    // every level: the same bits.
-    let (done, bad) = dot16::dot_blocks_avx512(w, chans, irr, nb, out);
-    let rest = dot_row_generic(w, &chans[done..], &irr[done * nb..], nb, &mut out[done..]);
-    bad | rest
+    // Whole blocks of 16 pixels reduced together (16–32 bands).
+    let blocks = dot16::dot_blocks_avx512(w, chans, irr, nb, out);
+    dot_row_after_blocks(blocks, w, chans, irr, nb, out)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma,bmi2")]
 fn dot_row_avx2(w: &[Vec<f32>], chans: &[u8], irr: &[f32], nb: usize, out: &mut [f32]) -> bool {
-    dot_row_generic(w, chans, irr, nb, out)
+    // Whole blocks of 8 pixels reduced together (16–32 bands).
+    let blocks = dot16::dot_blocks_avx2(w, chans, irr, nb, out);
+    dot_row_after_blocks(blocks, w, chans, irr, nb, out)
+}
+
+/// The pixels a block kernel left (`blocks`: the pixels it did, and whether one
+/// of them was invalid) as at every level: the same bits. Inlined into each
+/// level's row function, so compiled for its instruction set.
+#[inline(always)]
+fn dot_row_after_blocks(
+    (done, bad): (usize, bool),
+    w: &[Vec<f32>],
+    chans: &[u8],
+    irr: &[f32],
+    nb: usize,
+    out: &mut [f32],
+) -> bool {
+    let rest = dot_row_generic(w, &chans[done..], &irr[done * nb..], nb, &mut out[done..]);
+    bad | rest
 }
 
 #[inline(always)]
