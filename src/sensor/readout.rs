@@ -434,7 +434,8 @@ impl Readout {
     /// The first two normals of every pixel's stream `key` of the row starting at
     /// full-frame index `gi0` ([`first_normals`]), into `gain` and `offset`
     /// (`NormalRows::Fpn`) or `n1` and `n2` (`NormalRows::Read`), their acceptances into
-    /// `ok_a` and `ok_b`: eight pixels per instruction at the AVX-512 level.
+    /// `ok_a` and `ok_b`: eight pixels per instruction at the AVX-512 level, four
+    /// at the AVX2 level.
     #[inline(always)]
     fn first_normals(
         &self,
@@ -455,17 +456,14 @@ impl Readout {
             ok2: &mut s.ok_b,
         };
         #[cfg(target_arch = "x86_64")]
-        if self.isa == Isa::Avx512 {
+        match self.isa {
             // SAFETY: `isa` was detected on this CPU (Isa::detect).
-            unsafe { first_normals_avx512(zx, key, gi0, out) };
-            return;
-        }
-        #[cfg(target_arch = "x86_64")]
-        if self.isa == Isa::Avx2 {
+            Isa::Avx512 => unsafe { first_normals_avx512(zx, key, gi0, out) },
             // SAFETY: as above.
-            unsafe { first_normals_avx2(zx, key, gi0, out) };
-            return;
+            Isa::Avx2 => unsafe { first_normals_avx2(zx, key, gi0, out) },
+            Isa::Baseline => first_normals(zx, key, gi0, out),
         }
+        #[cfg(not(target_arch = "x86_64"))]
         first_normals(zx, key, gi0, out);
     }
 

@@ -36,11 +36,7 @@ pub(super) fn dot_blocks_avx512(
     out: &mut [f32],
 ) -> (usize, bool) {
     const L: usize = 16;
-    if !(L..=2 * L).contains(&nb) || w.iter().any(|wc| wc.len() < nb) {
-        return (0, false);
-    }
-    let n = out.len().min(chans.len()).min(irr.len() / nb);
-    let blocks = n / L;
+    let blocks = block_pixels(w, chans, irr, nb, out) / L;
     // Lanes of the spectrum's last 16 bands that the first 16 did not cover.
     let r = nb - L;
     let tail: __mmask16 = !(((1u32 << (L - r)) - 1) as u16);
@@ -84,6 +80,19 @@ pub(super) fn dot_blocks_avx512(
         unsafe { _mm512_storeu_ps(out.as_mut_ptr().add(b * L), d) };
     }
     (blocks * L, neg != 0 || !sums_finite)
+}
+
+/// The pixels the block kernels may take: those with an output, a channel and a
+/// whole spectrum, when a spectrum has 16 to 32 bands and every channel's
+/// weights at least as many (what makes their loads of bands [0, 16) and
+/// [nb − 16, nb) sound); none otherwise.
+#[cfg(target_arch = "x86_64")]
+fn block_pixels(w: &[Vec<f32>], chans: &[u8], irr: &[f32], nb: usize, out: &[f32]) -> usize {
+    const L: usize = 16;
+    if !(L..=2 * L).contains(&nb) || w.iter().any(|wc| wc.len() < nb) {
+        return 0;
+    }
+    out.len().min(chans.len()).min(irr.len() / nb)
 }
 
 /// The sixteen lane sums of `v` (one register per pixel) as `lane_tree_sum` adds
@@ -142,11 +151,7 @@ pub(super) fn dot_blocks_avx2(
 ) -> (usize, bool) {
     const L: usize = 16;
     const P: usize = 8;
-    if !(L..=2 * L).contains(&nb) || w.iter().any(|wc| wc.len() < nb) {
-        return (0, false);
-    }
-    let n = out.len().min(chans.len()).min(irr.len() / nb);
-    let blocks = n / P;
+    let blocks = block_pixels(w, chans, irr, nb, out) / P;
     // Lanes of the spectrum's last 16 bands that the first 16 did not cover
     // (lane i ≥ 16 − r), as the two halves' load masks.
     let r = (nb - L) as i32;
