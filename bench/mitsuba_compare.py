@@ -112,6 +112,12 @@ def mitsuba_llvm_target(dr, isa):
     return cpu().decode(), width()
 
 
+def kernel_name(target):
+    """What Mitsuba's kernels were compiled for, as the scripts print it
+    (`target`: `load_mitsuba`'s, None for the scalar variant)."""
+    return f"{target[0]}, {target[1]} lanes" if target else "scalar"
+
+
 def load_mitsuba(threads, max_depth=7, isa="native"):
     """Mitsuba with its spectral variant, the scene, and what its kernels are
     compiled for (`mitsuba_llvm_target`; None for the scalar variant)."""
@@ -291,7 +297,7 @@ def main():
     os.makedirs(a.cache, exist_ok=True)
 
     mi, dr, variant, scene, target = load_mitsuba(a.threads, isa=a.mitsuba_isa)
-    mitsuba_kernel = f"{target[0]}, {target[1]} lanes" if target else "scalar"
+    mitsuba_kernel = kernel_name(target)
     print(f"Mitsuba {mi.__version__} {variant} (kernels for {mitsuba_kernel}), {a.threads} threads; "
           f"scene cornell_box(), {W}×{H}, max_depth 7, box filter")
     print("  Jakob–Hanika coefficients (must equal camsim's src/render/bench.rs JH_*):")

@@ -56,7 +56,7 @@ def main():
         tc = min(camsim_s(a.camsim, a.spp, d - 1, s, a.threads) for s in range(1, a.repeats + 1))
         rows.append((d, tm, tc))
     paths = mc.W * mc.H * a.spp
-    mitsuba_kernel = f"{target[0]}, {target[1]} lanes" if target else "scalar"
+    mitsuba_kernel = mc.kernel_name(target)
     print(f"{mc.W}×{mc.H}, {a.spp} spp, {a.threads} threads, Mitsuba {mi.__version__} {variant} "
           f"(kernels for {mitsuba_kernel}), camsim kernel {mc.CAMSIM_ISA[-1]}; least of {a.repeats} renders each")
     print(f"{'Mitsuba max_depth':>17} {'camsim max_bounces':>18} {'Mitsuba s':>10} {'step':>7} "
