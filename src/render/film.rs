@@ -1,6 +1,7 @@
 //! The film: pixel sampling, camera weights, batch statistics, labels and
 //! depth, parallel over image rows with per-pixel seeding.
 
+use super::bands;
 use super::integrator::{
     PacketScratch, Scratch, add_unblocked, first_hit, packet_rays, shade_hits, trace,
 };
@@ -437,12 +438,7 @@ impl RunJob<'_> {
                 .enumerate()
                 .for_each(|(j, x)| *x = if j == b { nb as f32 } else { 0.0 }),
             // Padding bands (≥ nb) carry no throughput.
-            // Written band by band, not as two fills: a fill of run-time
-            // length is a call to `memset`.
-            None => beta
-                .iter_mut()
-                .enumerate()
-                .for_each(|(j, x)| *x = if j < nb { 1.0 } else { 0.0 }),
+            None => bands::ones(beta, nb),
         }
     }
 
@@ -572,7 +568,7 @@ impl RunJob<'_> {
         out: &mut PixelOut<'_>,
     ) {
         let (world, s) = (self.world, self.s);
-        let nb = world.bands;
+        let nbp = world.bands_padded;
         // No more packets than the run has samples to fill (both ≥ 1).
         let np = self
             .in_flight
@@ -634,7 +630,7 @@ impl RunJob<'_> {
                             slot.tracing = 0;
                             slot.weights.clear();
                             slot.weights.resize(order.len(), None);
-                            slot.radiance.resize(order.len() * nb, 0.0);
+                            slot.radiance.resize(order.len() * nbp, 0.0);
                             next_ix += 1;
                             issuing = Some(k);
                             k
@@ -735,7 +731,10 @@ impl RunJob<'_> {
                 for lane in lanes(p.ended) {
                     let (k, n) = (p.slot[lane], p.sample[lane]);
                     let slot = &mut slots[k];
-                    slot.radiance[n * nb..(n + 1) * nb].copy_from_slice(&sc.radiance(lane)[..nb]);
+                    bands::copy(
+                        &mut slot.radiance[n * nbp..(n + 1) * nbp],
+                        sc.radiance(lane),
+                    );
                     slot.tracing -= 1;
                     self.finish_if_traced(slot, k, order, out, &mut free);
                 }
@@ -766,12 +765,12 @@ impl RunJob<'_> {
     /// Accumulate a traced pixel's samples in order and finish it.
     #[inline(always)]
     fn finish_slot(&self, slot: &PixelSlot, order: &[(u32, u32)], out: &mut PixelOut<'_>) {
-        let nb = self.world.bands;
+        let (nb, nbp) = (self.world.bands, self.world.bands_padded);
         out.acc.fill(0.0);
         for (k, &(bi, _)) in order.iter().enumerate() {
             if let Some(w) = slot.weights[k] {
                 let a = &mut out.acc[bi as usize * nb..(bi as usize + 1) * nb];
-                out.nan += accumulate(a, &slot.radiance[k * nb..(k + 1) * nb], w);
+                out.nan += accumulate(a, &slot.radiance[k * nbp..k * nbp + nb], w);
             }
         }
         self.finish_pixel(slot.ix, out);
@@ -970,7 +969,7 @@ struct PixelSlot {
     tracing: u32,
     /// Each sample's camera weight (`None`: vignetted, or not yet issued).
     weights: Vec<Option<f64>>,
-    /// Each traced sample's radiance, `bands` per sample.
+    /// Each traced sample's radiance, `bands_padded` per sample.
     radiance: Vec<f32>,
 }
 

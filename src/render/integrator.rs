@@ -11,8 +11,9 @@
 //! and only dispersive paths pay the colour noise.
 
 use super::accel::Hit;
+use super::bands;
 use super::geometry::offset_ray_origin;
-use super::path::{PathState, ShadowRay, add_emitted, add_scaled, roulette};
+use super::path::{PathState, ShadowRay, add_emitted, roulette};
 use super::ray_packet::{LANES, LaneMask, PacketHits, RayPacket, lanes};
 use super::sampler::{BounceDraws, Sampler};
 use super::sampling::{Frame, power_heuristic};
@@ -66,7 +67,7 @@ pub fn escape(world: &World, st: &PathState, beta: &[f32], l: &mut [f32]) {
                 let pl = world.light_pmf[li as usize] / (4.0 * std::f32::consts::PI);
                 power_heuristic(st.prev_pdf, pl)
             };
-            add_scaled(l, beta, le, w);
+            bands::add_scaled(l, beta, le, w);
         }
     }
 }
@@ -209,9 +210,7 @@ pub fn scatter(
     if same_side != refl_local {
         return (shadow, false);
     }
-    for (b, &f) in beta.iter_mut().zip(f.iter()) {
-        *b *= f;
-    }
+    let top = bands::mul_max(beta, f);
     st.specular = bs.delta;
     st.prev_pdf = bs.pdf;
     st.eta_scale *= bs.eta_scale;
@@ -222,18 +221,10 @@ pub fn scatter(
     };
     st.d = wi_w;
     st.depth += 1;
-    if !roulette(st, nb, u_rr, beta) {
+    if !roulette(st, nb, top, u_rr, beta) {
         return (shadow, false);
     }
     (shadow, true)
-}
-
-/// Add a path's pending next-event contribution to its radiance.
-#[inline(always)]
-fn add_pending(l: &mut [f32], pend: &[f32]) {
-    for (o, &x) in l.iter_mut().zip(pend) {
-        *o += x;
-    }
 }
 
 /// Trace one path. On entry `sc.beta` holds the initial throughput (1 for all
@@ -316,7 +307,7 @@ impl PacketScratch {
     /// Clear lane `lane`'s radiance for a new path.
     #[inline(always)]
     pub fn clear_radiance(&mut self, lane: usize) {
-        self.l[lane * self.stride..(lane + 1) * self.stride].fill(0.0);
+        bands::zero(&mut self.l[lane * self.stride..(lane + 1) * self.stride]);
     }
 }
 
@@ -424,7 +415,7 @@ pub fn shade_hits(
 pub fn add_unblocked(free: LaneMask, sc: &mut PacketScratch) {
     let n = sc.stride;
     for i in lanes(free) {
-        add_pending(&mut sc.l[i * n..(i + 1) * n], &sc.pend[i * n..(i + 1) * n]);
+        bands::add(&mut sc.l[i * n..(i + 1) * n], &sc.pend[i * n..(i + 1) * n]);
     }
 }
 

@@ -84,6 +84,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod accel;
+mod bands;
 pub mod bench;
 pub mod bsdf;
 pub mod bvh4;

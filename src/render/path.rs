@@ -1,10 +1,12 @@
 //! One path between bounces: the state a path carries from one hit to the
 //! next (its ray, MIS state, bounce count, refraction scale, hero band), the
-//! next-event shadow ray a bounce may leave to test, and the band arithmetic
-//! on a path's throughput that every bounce does, whether one path is shaded
-//! at a time (`integrator::scatter`) or a packet's diffuse hits together
-//! (`shade_packet`).
+//! next-event shadow ray a bounce may leave to test, and what every bounce
+//! does with a path's throughput (emission gathered, Russian roulette),
+//! whether one path is shaded at a time (`integrator::scatter`) or a
+//! packet's diffuse hits together (`shade_packet`); the band arithmetic
+//! itself is `bands.rs`'s.
 
+use super::bands;
 use super::geometry::offset_ray_origin;
 use super::sampling::power_heuristic;
 use super::world::{LightKind, LightSample, World};
@@ -13,24 +15,6 @@ use glam::Vec3;
 /// Fraction of a shadow ray's length left untested at its far end, so it does
 /// not hit the light it aims at (pbrt's ShadowEpsilon).
 pub(super) const SHADOW_EPS: f32 = 1e-4;
-
-/// Largest band value (at least 0). For finite values the same as folding
-/// with `f32::max`: non-negative floats order as their bit patterns read as
-/// signed integers, and negative ones read negative, so an integer maximum
-/// from 0 (which vectorises across all the bands; the float one did not)
-/// picks the same band. A NaN band may be returned (the path then ends; its
-/// non-finite result is counted and dropped either way).
-#[inline(always)]
-fn max_band(v: &[f32]) -> f32 {
-    f32::from_bits(v.iter().fold(0i32, |m, x| m.max(x.to_bits() as i32)) as u32)
-}
-
-#[inline(always)]
-pub(super) fn add_scaled(l: &mut [f32], beta: &[f32], e: &[f32], s: f32) {
-    for ((o, &b), &x) in l.iter_mut().zip(beta).zip(e) {
-        *o += b * x * s;
-    }
-}
 
 /// One path between bounces: the ray it follows next and what its next
 /// hit needs to know (MIS state, bounce count, refraction scale, hero band).
@@ -131,14 +115,18 @@ pub(super) fn add_emitted(
             let pl = world.area_light_pdf(light, dist, cos_l);
             power_heuristic(st.prev_pdf, pl)
         };
-        add_scaled(l, beta, le, w);
+        bands::add_scaled(l, beta, le, w);
     }
 }
 
 /// Russian roulette on the throughput `beta` (with refraction scaling undone;
 /// `nb` bands, a hero path's one band scaled by `nb`) after the bounce that
 /// made `st.depth`, with draw `u_rr`: false when the path ends, else the
-/// survivor's throughput is scaled up by 1/(1 − q).
+/// survivor's throughput is scaled up by 1/(1 − q). `top` is `beta`'s
+/// largest band (`bands::max`), which the caller has from the bounce's
+/// product (`bands::mul_max`): reading the throughput back just after
+/// writing it stalled on the stores (docs/performance.md, *Twenty-third
+/// pass*).
 ///
 /// From the second bounce on, a path survives with probability
 /// p = min(1, m / m₁): m is the throughput's largest band and m₁ the same
@@ -157,8 +145,15 @@ pub(super) fn add_emitted(
 /// bit mask) measured +0.6 % on the bench, within what the code's layout
 /// moves (docs/performance.md, *Tenth pass*).
 #[inline(always)]
-pub(super) fn roulette(st: &mut PathState, nb: usize, u_rr: f32, beta: &mut [f32]) -> bool {
-    let mut m = max_band(beta) * st.eta_scale;
+pub(super) fn roulette(
+    st: &mut PathState,
+    nb: usize,
+    top: f32,
+    u_rr: f32,
+    beta: &mut [f32],
+) -> bool {
+    debug_assert_eq!(top.to_bits(), bands::max(beta).to_bits());
+    let mut m = top * st.eta_scale;
     if st.hero.is_some() {
         m /= nb as f32;
     }
@@ -175,7 +170,7 @@ pub(super) fn roulette(st: &mut PathState, nb: usize, u_rr: f32, beta: &mut [f32
             return false;
         }
         let s = 1.0 / (1.0 - q);
-        beta.iter_mut().for_each(|b| *b *= s);
+        bands::scale(beta, s);
     }
     true
 }
@@ -183,33 +178,6 @@ pub(super) fn roulette(st: &mut PathState, nb: usize, u_rr: f32, beta: &mut [f32
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::render::sampling::Rng;
-
-    /// `max_band` is the float maximum from 0 for bands of any sign and
-    /// size (subnormals, zeros of both signs, infinity), at every length
-    /// around a vector's (tails included).
-    #[test]
-    fn max_band_is_the_float_maximum_from_zero() {
-        let mut rng = Rng::for_sample(3, 1, 4);
-        for n in 0..=40 {
-            for trial in 0..50 {
-                let v: Vec<f32> = (0..n)
-                    .map(|k| match (trial + k) % 9 {
-                        0 => -rng.uniform() * 3.0,
-                        1 => -0.0,
-                        2 => 0.0,
-                        3 => f32::from_bits(rng.next_u32() & 0x007f_ffff),
-                        4 if trial == 7 => f32::INFINITY,
-                        _ => rng.uniform() * 10f32.powi((rng.next_u32() % 20) as i32 - 10),
-                    })
-                    .collect();
-                let want = v.iter().fold(0.0f32, |m, &x| m.max(x));
-                let got = max_band(&v);
-                assert_eq!(got, want, "{v:?}");
-                assert!(got >= 0.0 && got.is_sign_positive());
-            }
-        }
-    }
 
     /// Russian roulette against its rule stated plainly (survive with
     /// p = min(1, m/m₁) from the second bounce, m₁ set at the first, the
@@ -245,7 +213,8 @@ mod tests {
                         let mut st = PathState::camera(Vec3::ZERO, Vec3::Z, None);
                         (st.depth, st.rr_ref) = (depth, rr_ref);
                         let mut beta = beta0.clone();
-                        let lives = roulette(&mut st, 31, u, &mut beta);
+                        let top = bands::max(&beta);
+                        let lives = roulette(&mut st, 31, top, u, &mut beta);
                         assert_eq!(st.rr_ref, m1);
                         assert_eq!(
                             lives,

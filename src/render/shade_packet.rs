@@ -36,6 +36,7 @@
 // Lane loops index several per-lane arrays at once.
 #![allow(clippy::needless_range_loop)]
 
+use super::bands;
 use super::bsdf::Bsdf;
 use super::geometry::{HIT_POINT_GAMMA, Shape, offset_ray_origin, triangle_point};
 use super::path::{PathState, SHADOW_EPS, ShadowRay, add_emitted, roulette};
@@ -435,16 +436,13 @@ pub(super) fn shade_diffuse(
         };
         if nee & (1 << i) != 0 && nee_ok[i] {
             let le = world.lights[light[i]].spectrum();
-            let s = scale[i];
-            for (((o, &b), &ri), &e) in pend[span.clone()]
-                .iter_mut()
-                .zip(&beta[span.clone()])
-                .zip(r)
-                .zip(le)
-            {
-                let f = ri * (1.0 / PI);
-                *o = b * f * e * s;
-            }
+            bands::lambert_next_event(
+                &mut pend[span.clone()],
+                &beta[span.clone()],
+                r,
+                le,
+                scale[i],
+            );
             shadows.set(i, origin_front.get(i), shadow_d.get(i), tmax[i]);
         }
         if !cont[i] {
@@ -452,16 +450,14 @@ pub(super) fn shade_diffuse(
             continue;
         }
         let b = &mut beta[span];
-        for (x, &ri) in b.iter_mut().zip(r) {
-            *x *= ri;
-        }
+        let top = bands::mul_max(b, r);
         let s = &mut st[i];
         s.specular = false;
         s.prev_pdf = bsdf_pdf[i];
         s.o = next_o.get(i);
         s.d = next_d.get(i);
         s.depth += 1;
-        if !roulette(s, nb, u_rr[i], b) {
+        if !roulette(s, nb, top, u_rr[i], b) {
             ended |= 1 << i;
         }
     }

@@ -7,6 +7,7 @@
 //! instance is treated as a prototype only and is not rendered by itself.
 
 use super::accel::{Accel, BvhKind};
+use super::bands;
 use super::bsdf::{Bsdf, mean};
 use super::geometry::{HIT_POINT_GAMMA, PrimHit, Shape, triangle_point};
 use super::sampling::{
@@ -152,15 +153,12 @@ pub struct World {
     pub radius: f32,
     pub bands: usize,
     /// Length of every band vector in the world (`bands` rounded up to a
-    /// multiple of `BAND_PAD`; the extra bands are zero in emission and
+    /// multiple of `bands::BAND_PAD`; the extra bands are zero in emission and
     /// reflectance, and the integrator keeps their throughput at 0).
     pub bands_padded: usize,
     /// A dielectric with wavelength-dependent ior is present.
     pub dispersive: bool,
 }
-
-/// Band vectors are padded to a multiple of this (two SSE registers).
-pub const BAND_PAD: usize = 8;
 
 fn resample(s: &Spectrum, grid: &WavelengthGrid, what: &str) -> Result<Vec<f32>> {
     let v = s
@@ -483,7 +481,7 @@ impl World {
             *l = 1.0;
         }
         // Pad every band vector (after all means above are taken).
-        let nbp = nb.next_multiple_of(BAND_PAD);
+        let nbp = nb.next_multiple_of(bands::BAND_PAD);
         for b in &mut bsdfs {
             b.pad_bands(nbp);
         }
