@@ -63,6 +63,13 @@ impl First for &mut [Block] {
     }
 }
 
+impl First for &mut [[f64; BAND_PAD]] {
+    #[inline(always)]
+    fn first(self, n: usize) -> Self {
+        &mut self[..n]
+    }
+}
+
 /// `$body` for every block index `$k` of the vectors `$v` (the first one's
 /// block count; the others must have as many), with the count a constant
 /// for one to three blocks (16 to 48 bands; the 31-band grid is two). With
@@ -212,6 +219,34 @@ pub fn mul_max(o: &mut [f32], x: &[f32]) -> f32 {
     max_of(m)
 }
 
+/// `acc += l · w` in every band, in f64 (a finished path's radiance `l`,
+/// weighted by its camera weight `w`, added to its pixel's batch totals),
+/// unless a band of `l` is not finite: then `acc` is left as it was and
+/// the result is false. The check is the largest magnitude's bits over
+/// every band (an integer maximum, which vectorises; `is_finite` per band
+/// did not): not finite when at least the infinity's.
+#[inline(always)]
+pub fn add_finite_f64(acc: &mut [f64], l: &[f32], w: f64) -> bool {
+    let (acc, l) = (acc.as_chunks_mut::<BAND_PAD>().0, blocks(l));
+    let mut top = [0u32; BAND_PAD];
+    by_blocks!((l), k => {
+        for j in 0..BAND_PAD {
+            top[j] = top[j].max(l[k][j].to_bits() & 0x7fff_ffff);
+        }
+    });
+    if top.into_iter().fold(0, u32::max) >= f32::INFINITY.to_bits() {
+        return false;
+    }
+    by_blocks!((l, acc), k => {
+        let mut t = acc[k];
+        for j in 0..BAND_PAD {
+            t[j] += l[k][j] as f64 * w;
+        }
+        acc[k] = t;
+    });
+    true
+}
+
 /// The float whose bits are the largest of `m` (from 0).
 #[inline(always)]
 fn max_of(m: [i32; BAND_PAD]) -> f32 {
@@ -278,6 +313,21 @@ mod tests {
                     .map(|j| b[j] * (r[j] * (1.0 / pi)) * e[j] * s)
                     .collect();
                 same(&o, want, "lambert_next_event");
+                let acc0: Vec<f64> = b.iter().map(|&x| x as f64 * 1.5).collect();
+                let mut acc = acc0.clone();
+                let w = s as f64 * 0.7;
+                assert!(add_finite_f64(&mut acc, &e, w));
+                let want: Vec<f64> = (0..o0.len()).map(|j| acc0[j] + e[j] as f64 * w).collect();
+                let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&acc), bits(&want), "add_finite_f64, {n} blocks");
+                for bad in [f32::INFINITY, f32::NEG_INFINITY, f32::NAN] {
+                    let mut l = e.clone();
+                    let at = rng.next_u32() as usize % l.len();
+                    l[at] = bad;
+                    let mut acc = acc0.clone();
+                    assert!(!add_finite_f64(&mut acc, &l, w), "{bad} passed");
+                    assert_eq!(bits(&acc), bits(&acc0), "{bad} changed the totals");
+                }
                 let mut o = o0.clone();
                 copy(&mut o, &e);
                 same(&o, e.clone(), "copy");

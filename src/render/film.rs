@@ -232,22 +232,12 @@ pub fn render_world_at(
     Ok(img)
 }
 
-/// Add a finished path's radiance `l`, scaled by the camera weight, to its
-/// batch total `acc`; a path with a non-finite band is dropped and counted
-/// (returns 1).
+/// Add a finished path's radiance `l` (`bands_padded` long), scaled by the
+/// camera weight, to its batch total `acc` (as long); a path with a
+/// non-finite band is dropped and counted (returns 1).
 #[inline(always)]
 fn accumulate(acc: &mut [f64], l: &[f32], weight: f64) -> u64 {
-    // No early exit: the largest magnitude's bits over every band (an
-    // integer maximum, which vectorises; `is_finite` per band did not):
-    // non-finite when at least the infinity's.
-    let top = l.iter().fold(0u32, |m, x| m.max(x.to_bits() & 0x7fff_ffff));
-    if top >= f32::INFINITY.to_bits() {
-        return 1;
-    }
-    for (x, &l) in acc.iter_mut().zip(l) {
-        *x += l as f64 * weight;
-    }
-    0
+    u64::from(!bands::add_finite_f64(acc, l, weight))
 }
 
 /// Whether a run's samples are traced 16 paths at a time
@@ -508,7 +498,7 @@ impl RunJob<'_> {
             wse: vec![0f32; if batches > 1 { n_px * nsets } else { 0 }],
             mean_px: vec![0.0f64; nb],
             ss_px: vec![0.0f64; nb],
-            acc: vec![0.0f64; nb * batches],
+            acc: vec![0.0f64; world.bands_padded * batches],
             counts: (0..batches)
                 .map(|bi| batch_len(s.spp, batches, bi) as u32)
                 .collect(),
@@ -537,8 +527,9 @@ impl RunJob<'_> {
                     {
                         self.init_beta(st.hero, &mut sc.beta);
                         trace(world, st.o, st.d, s.max_bounces, st.hero, &mut smp, &mut sc);
-                        let a = &mut out.acc[bi as usize * nb..(bi as usize + 1) * nb];
-                        out.nan += accumulate(a, &sc.l[..nb], w);
+                        let nbp = world.bands_padded;
+                        let a = &mut out.acc[bi as usize * nbp..(bi as usize + 1) * nbp];
+                        out.nan += accumulate(a, &sc.l, w);
                     }
                 }
                 self.finish_pixel(ix, &mut out);
@@ -765,12 +756,12 @@ impl RunJob<'_> {
     /// Accumulate a traced pixel's samples in order and finish it.
     #[inline(always)]
     fn finish_slot(&self, slot: &PixelSlot, order: &[(u32, u32)], out: &mut PixelOut<'_>) {
-        let (nb, nbp) = (self.world.bands, self.world.bands_padded);
+        let nbp = self.world.bands_padded;
         out.acc.fill(0.0);
         for (k, &(bi, _)) in order.iter().enumerate() {
             if let Some(w) = slot.weights[k] {
-                let a = &mut out.acc[bi as usize * nb..(bi as usize + 1) * nb];
-                out.nan += accumulate(a, &slot.radiance[k * nbp..k * nbp + nb], w);
+                let a = &mut out.acc[bi as usize * nbp..(bi as usize + 1) * nbp];
+                out.nan += accumulate(a, &slot.radiance[k * nbp..(k + 1) * nbp], w);
             }
         }
         self.finish_pixel(slot.ix, out);
@@ -780,7 +771,7 @@ impl RunJob<'_> {
     /// `out.acc`. Totals add the batches in order 0, 1, … for every band.
     #[inline(always)]
     fn finish_pixel(&self, ix: usize, out: &mut PixelOut<'_>) {
-        let nb = self.world.bands;
+        let (nb, nbp) = (self.world.bands, self.world.bands_padded);
         let batches = self.batches;
         let nsets = self.wsets.len();
         let PixelOut {
@@ -797,7 +788,7 @@ impl RunJob<'_> {
         let n = self.s.spp as f64;
         let irr_px = &mut irr[ix * nb..(ix + 1) * nb];
         mean_px.fill(0.0);
-        for a in acc.chunks_exact(nb) {
+        for a in acc.chunks_exact(nbp) {
             for (t, &x) in mean_px.iter_mut().zip(a) {
                 *t += x;
             }
@@ -808,7 +799,7 @@ impl RunJob<'_> {
         }
         if batches > 1 {
             ss_px.fill(0.0);
-            for (a, &c) in acc.chunks_exact(nb).zip(counts.iter()) {
+            for (a, &c) in acc.chunks_exact(nbp).zip(counts.iter()) {
                 let c = c.max(1) as f64;
                 for ((q, &x), &mean) in ss_px.iter_mut().zip(a).zip(mean_px.iter()) {
                     let m = x / c;
@@ -830,7 +821,8 @@ impl RunJob<'_> {
                 // (independent sums the core overlaps; same bits).
                 batch_w.fill(-0.0);
                 for (j, &wb) in w.iter().enumerate() {
-                    for ((m, a), &c) in batch_w.iter_mut().zip(acc.chunks_exact(nb)).zip(&*counts) {
+                    for ((m, a), &c) in batch_w.iter_mut().zip(acc.chunks_exact(nbp)).zip(&*counts)
+                    {
                         *m += wb as f64 * a[j] / c.max(1) as f64;
                     }
                 }
@@ -876,7 +868,7 @@ struct PixelOut<'a> {
     wse: Vec<f32>,
     mean_px: Vec<f64>,
     ss_px: Vec<f64>,
-    /// The pixel's batch totals, batch-major.
+    /// The pixel's batch totals, batch-major, `bands_padded` per batch.
     acc: Vec<f64>,
     /// Samples per batch (vignetted ones included).
     counts: Vec<u32>,
