@@ -49,21 +49,14 @@ trait First {
     fn first(self, n: usize) -> Self;
 }
 
-impl First for &[Block] {
+impl<T> First for &[T] {
     #[inline(always)]
     fn first(self, n: usize) -> Self {
         &self[..n]
     }
 }
 
-impl First for &mut [Block] {
-    #[inline(always)]
-    fn first(self, n: usize) -> Self {
-        &mut self[..n]
-    }
-}
-
-impl First for &mut [[f64; BAND_PAD]] {
+impl<T> First for &mut [T] {
     #[inline(always)]
     fn first(self, n: usize) -> Self {
         &mut self[..n]
@@ -149,7 +142,7 @@ pub fn ones(o: &mut [f32], n: usize) {
 #[inline(always)]
 pub fn zero(o: &mut [f32]) {
     let o = blocks_mut(o);
-    set_blocks!(o = (), k, j => { let _ = (k, j); 0.0 });
+    set_blocks!(o = (), _k, _j => 0.0);
 }
 
 /// `o += x` in every band.
@@ -172,6 +165,22 @@ pub fn scale(o: &mut [f32], s: f32) {
 pub fn add_scaled(o: &mut [f32], b: &[f32], e: &[f32], s: f32) {
     let (o, b, e) = (blocks_mut(o), blocks(b), blocks(e));
     set_blocks!(o = (b, e), k, j => o[k][j] + b[k][j] * e[k][j] * s);
+}
+
+/// `o = ((b · f) · e) · s` in every band: a next-event contribution through
+/// a path of throughput `b`, a BSDF value `f` and an emitter's radiance `e`,
+/// weighted by `s`.
+#[inline(always)]
+pub fn next_event(o: &mut [f32], b: &[f32], f: &[f32], e: &[f32], s: f32) {
+    let (o, b, f, e) = (blocks_mut(o), blocks(b), blocks(f), blocks(e));
+    set_blocks!(o = (b, f, e), k, j => b[k][j] * f[k][j] * e[k][j] * s);
+}
+
+/// `o += ((b · f) · e) · s` in every band: `next_event`'s term added.
+#[inline(always)]
+pub fn add_next_event(o: &mut [f32], b: &[f32], f: &[f32], e: &[f32], s: f32) {
+    let (o, b, f, e) = (blocks_mut(o), blocks(b), blocks(f), blocks(e));
+    set_blocks!(o = (b, f, e), k, j => o[k][j] + b[k][j] * f[k][j] * e[k][j] * s);
 }
 
 /// `o = ((b · (r / π)) · e) · s` in every band: a Lambertian surface of
@@ -307,6 +316,16 @@ mod tests {
                 add_scaled(&mut o, &b, &e, s);
                 let want = (0..o0.len()).map(|j| o0[j] + b[j] * e[j] * s).collect();
                 same(&o, want, "add_scaled");
+                let mut o = o0.clone();
+                next_event(&mut o, &b, &r, &e, s);
+                let want = (0..o0.len()).map(|j| b[j] * r[j] * e[j] * s).collect();
+                same(&o, want, "next_event");
+                let mut o = o0.clone();
+                add_next_event(&mut o, &b, &r, &e, s);
+                let want = (0..o0.len())
+                    .map(|j| o0[j] + b[j] * r[j] * e[j] * s)
+                    .collect();
+                same(&o, want, "add_next_event");
                 let mut o = o0.clone();
                 lambert_next_event(&mut o, &b, &r, &e, s);
                 let want = (0..o0.len())

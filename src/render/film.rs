@@ -513,7 +513,8 @@ impl RunJob<'_> {
         if self.packets {
             self.run_packets(y0, &order, lab, dep, &mut out);
         } else {
-            let mut sc = Scratch::new(world.bands_padded);
+            let nbp = world.bands_padded;
+            let mut sc = Scratch::new(nbp);
             let mut smp = Sampler::independent(Rng::for_sample(0, 0, 0));
             let mut scrambles: Vec<BatchScramble> = Vec::with_capacity(batches);
             for ix in 0..n_px {
@@ -527,7 +528,6 @@ impl RunJob<'_> {
                     {
                         self.init_beta(st.hero, &mut sc.beta);
                         trace(world, st.o, st.d, s.max_bounces, st.hero, &mut smp, &mut sc);
-                        let nbp = world.bands_padded;
                         let a = &mut out.acc[bi as usize * nbp..(bi as usize + 1) * nbp];
                         out.nan += accumulate(a, &sc.l, w);
                     }

@@ -179,18 +179,9 @@ pub fn scatter(
             if contributes {
                 let pdf_b = bsdf.eval(wo, wi, f);
                 let s = ls.next_event_scale(wi.z, pdf_b);
-                if let Some(pend) = pend {
-                    for (((o, &b), &f), &e) in
-                        pend.iter_mut().zip(beta.iter()).zip(f.iter()).zip(ls.spec)
-                    {
-                        *o = b * f * e * s;
-                    }
-                } else {
-                    for (((o, &b), &f), &e) in
-                        l.iter_mut().zip(beta.iter()).zip(f.iter()).zip(ls.spec)
-                    {
-                        *o += b * f * e * s;
-                    }
+                match pend {
+                    Some(pend) => bands::next_event(pend, beta, f, ls.spec, s),
+                    None => bands::add_next_event(l, beta, f, ls.spec, s),
                 }
             }
         }
