@@ -305,7 +305,7 @@ impl PacketScratch {
 // One bounce of a packet's paths (issue 17 item 1) is three steps, so that a
 // row can cast the rays of several packets together (`ray_stream`):
 // `packet_rays` (the live lanes' rays), the closest hits, `shade_hits` (the
-// lanes whose hits `World::packet_shadable` accepts — Lambertian triangles
+// lanes whose hits `World::hit_kind` calls shadable — Lambertian triangles
 // — shaded together in structure of arrays by
 // `shade_packet::shade_diffuse`, every other lane on its own by `scatter`;
 // their shadow rays), the shadow rays' occlusion, then `add_unblocked`. Lane
@@ -343,19 +343,25 @@ pub fn shade_hits(
     let n = sc.stride;
     let mut ended: LaneMask = 0;
     sc.shadows.active = 0;
-    let mut together: LaneMask = 0;
+    // Which lanes missed, and which hits `shade_diffuse` takes, as masks
+    // made without a branch per lane (whether a ray hit is data the branch
+    // predictor cannot learn).
+    let (mut missed, mut together): (LaneMask, LaneMask) = (0, 0);
     for i in lanes(alive) {
+        let (hit, shadable) = world.hit_kind(sc.hits.prim[i]);
+        missed |= (!hit as LaneMask) << i;
+        together |= (shadable as LaneMask) << i;
+    }
+    ended |= missed;
+    if !world.infinite.is_empty() {
+        for i in lanes(missed) {
+            let span = i * n..(i + 1) * n;
+            escape(world, &st[i], &sc.beta[span.clone()], &mut sc.l[span]);
+        }
+    }
+    for i in lanes(alive & !missed & !together) {
         let span = i * n..(i + 1) * n;
         let prim = sc.hits.prim[i];
-        if prim == u32::MAX {
-            escape(world, &st[i], &sc.beta[span.clone()], &mut sc.l[span]);
-            ended |= 1 << i;
-            continue;
-        }
-        if world.packet_shadable(prim) {
-            together |= 1 << i;
-            continue;
-        }
         let hit = Hit {
             prim,
             h: sc.hits.h[i],

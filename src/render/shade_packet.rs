@@ -12,7 +12,7 @@
 //! (next-event contribution, throughput, Russian roulette).
 //!
 //! Which hits: a triangle with a `Diffuse` material, with or without vertex
-//! normals, under lights of any kind (`World::packet_shadable`). Before
+//! normals, under lights of any kind (`World::hit_kind`). Before
 //! 2026-11-29 only triangles without vertex normals in worlds whose lights
 //! were all area lights on triangles: the paper's Cornell box meshes carry
 //! normals, so its figures shaded every hit one lane at a time.
@@ -90,7 +90,7 @@ pub(super) struct LaneBands<'a> {
     pub pend: &'a mut [f32],
 }
 
-/// Shade the hits of the lanes in `todo` (each `World::packet_shadable`):
+/// Shade the hits of the lanes in `todo` (each shadable by `World::hit_kind`):
 /// what `scatter` does for each of them, with the next-event shadow rays put
 /// in `shadows` and their contributions in `bands.pend`, as `scatter` does
 /// with a pending buffer. Returns the lanes whose paths ended. `isa`: the
@@ -140,7 +140,7 @@ pub(super) fn shade_diffuse(
     for i in lanes(todo) {
         let prim = hits.prim[i];
         let Shape::Triangle { p } = world.accel.shapes[prim as usize] else {
-            unreachable!("shade_diffuse is given triangles only (World::packet_shadable)")
+            unreachable!("shade_diffuse is given triangles only (World::hit_kind)")
         };
         for (k, vk) in v.iter_mut().enumerate() {
             vk.set(i, p[k]);
@@ -432,7 +432,7 @@ pub(super) fn shade_diffuse(
         let span = i * stride..(i + 1) * stride;
         let Bsdf::Diffuse { r } = &world.bsdfs[world.info[hits.prim[i] as usize].material as usize]
         else {
-            unreachable!("shade_diffuse is given Lambertian hits only (World::packet_shadable)")
+            unreachable!("shade_diffuse is given Lambertian hits only (World::hit_kind)")
         };
         if nee & (1 << i) != 0 && nee_ok[i] {
             let le = world.lights[light[i]].spectrum();
@@ -457,9 +457,7 @@ pub(super) fn shade_diffuse(
         s.o = next_o.get(i);
         s.d = next_d.get(i);
         s.depth += 1;
-        if !roulette(s, nb, top, u_rr[i], b) {
-            ended |= 1 << i;
-        }
+        ended |= (!roulette(s, nb, top, u_rr[i], b) as LaneMask) << i;
     }
     clock.lap(Stage::ShadeBands);
     ended

@@ -558,11 +558,18 @@ impl World {
         }
     }
 
-    /// Whether a hit on `prim` can be shaded by `shade_packet`: a Lambertian
-    /// triangle (with or without vertex normals, lit by lights of any kind).
+    /// Whether `prim` (a closest hit's primitive, `u32::MAX` for a miss) is a
+    /// hit, and whether that hit can be shaded by `shade_packet`: a
+    /// Lambertian triangle (with or without vertex normals, lit by lights of
+    /// any kind). No branch on the miss (a missed lane reads the first
+    /// primitive's entry and drops it): whether a ray hit is data the branch
+    /// predictor cannot learn (docs/performance.md, *Twenty-fourth pass*).
     #[inline(always)]
-    pub(super) fn packet_shadable(&self, prim: u32) -> bool {
-        self.diffuse_tri[prim as usize]
+    pub(super) fn hit_kind(&self, prim: u32) -> (bool, bool) {
+        let hit = prim != u32::MAX;
+        let i = if hit { prim as usize } else { 0 };
+        let shadable = self.diffuse_tri.get(i).copied().unwrap_or(false);
+        (hit, hit & shadable)
     }
 
     /// Unit geometric normal of triangle primitive `prim`.
