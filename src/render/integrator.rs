@@ -212,10 +212,7 @@ pub fn scatter(
     };
     st.d = wi_w;
     st.depth += 1;
-    if !roulette(st, nb, top, u_rr, beta) {
-        return (shadow, false);
-    }
-    (shadow, true)
+    (shadow, roulette(st, nb, top, u_rr, beta))
 }
 
 /// Trace one path. On entry `sc.beta` holds the initial throughput (1 for all
