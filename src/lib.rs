@@ -8,6 +8,7 @@
 pub mod diag;
 pub mod experiment;
 pub mod figure;
+pub mod frame_buffer;
 pub mod image;
 pub mod machine;
 pub mod measure;

@@ -158,7 +158,7 @@ pub fn render_world_at(
         film.pixel_pitch_m,
         grid.clone(),
     );
-    img.stderr = vec![0.0; img.irradiance.len()];
+    img.stderr = crate::frame_buffer::zeroed(img.irradiance.len());
     img.label_names = label_names;
     img.spp = s.spp;
     let dispersive_cam = camera.is_dispersive();

@@ -19,7 +19,6 @@ pub mod calibrate;
 pub mod config;
 pub mod config_file;
 pub mod flatfield;
-pub mod frame_buffer;
 pub mod nnls;
 pub mod output;
 pub mod pipeline;

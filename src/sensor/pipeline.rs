@@ -28,10 +28,10 @@
 //! `SensorConfig::fpn_seed`; temporal noise on the frame seed.
 
 use super::config::{Exposure, RelativeIllumination, SensorConfig};
-use super::frame_buffer;
 use super::readout::{Isa, Readout, RowOut, Scratch};
 pub use super::readout::{fpn_column, fpn_pixel};
 use crate::diag::{Error, Result};
+use crate::frame_buffer;
 use crate::image::SensorImage;
 use crate::optical_image::{OpticalImage, Rect};
 use crate::spectrum::{Spectrum, WavelengthGrid, units};

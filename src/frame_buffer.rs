@@ -1,12 +1,17 @@
-//! Zeroed `f32` frame buffers for the sensor's outputs (DV, electrons, volts,
-//! mean electrons), backed by transparent huge pages where Linux offers them.
+//! Zeroed `f32` frame buffers for image planes — the optical image's
+//! irradiance and standard errors, the sensor's outputs (DV, electrons,
+//! volts, mean electrons) — backed by transparent huge pages where Linux
+//! offers them.
 //!
 //! A 12-megapixel frame is 48 MB per buffer. A fresh `vec![0f32; n]` of that
 //! size is mapped lazily: the first write to each 4 KiB page faults, and the
 //! kernel clears and maps it — ≈ 24 000 faults for DV and electrons together,
 //! ≈ 5 % of `camsim bench sensor`'s CPU time in a profile (perf, AVX-512 EPYC).
 //! Advised `MADV_HUGEPAGE` before the first write, the kernel maps 2 MiB pages
-//! instead (512× fewer faults). The advice changes neither the values nor the
+//! instead (512× fewer faults). The renderer's 256×256, 31-band optical image
+//! (8 MB) took ≈ 2000 such faults inside the timed render, 3.9 % of
+//! `camsim bench render`'s samples on the Xeon (docs/performance.md,
+//! *Twenty-fifth pass*). The advice changes neither the values nor the
 //! allocation; where it is refused (THP `never`, another OS) the buffer is a
 //! plain zeroed vector.
 
