@@ -21,10 +21,17 @@ const ADVISE_FROM_BYTES: usize = 4 << 20;
 /// A zeroed vector of `n` floats; large ones are advised to use huge pages.
 pub fn zeroed(n: usize) -> Vec<f32> {
     let v = vec![0f32; n];
-    if n * std::mem::size_of::<f32>() >= ADVISE_FROM_BYTES {
-        advise_huge_pages(&v);
-    }
+    advise(&v);
     v
+}
+
+/// Advise huge pages for a large buffer not yet written (a fresh
+/// `vec![0f32; n]`, whose pages are mapped on first write); pages already
+/// mapped stay as they are.
+pub fn advise(v: &[f32]) {
+    if std::mem::size_of_val(v) >= ADVISE_FROM_BYTES {
+        advise_huge_pages(v);
+    }
 }
 
 #[cfg(target_os = "linux")]

@@ -83,7 +83,7 @@ impl OpticalImage {
             full_height,
             window,
             pixel_pitch_m,
-            irradiance: crate::frame_buffer::zeroed(n * nb),
+            irradiance: vec![0.0; n * nb],
             stderr: vec![],
             weighted_stderr: vec![],
             labels: vec![crate::scene::NO_OBJECT; n],

@@ -158,6 +158,9 @@ pub fn render_world_at(
         film.pixel_pitch_m,
         grid.clone(),
     );
+    // The render writes every irradiance value once: huge pages spare it
+    // the page faults of a fresh buffer (`frame_buffer`).
+    crate::frame_buffer::advise(&img.irradiance);
     img.stderr = crate::frame_buffer::zeroed(img.irradiance.len());
     img.label_names = label_names;
     img.spp = s.spp;
