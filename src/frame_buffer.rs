@@ -1,7 +1,6 @@
-//! Zeroed `f32` frame buffers for image planes — the optical image's
-//! irradiance and standard errors, the sensor's outputs (DV, electrons,
-//! volts, mean electrons) — backed by transparent huge pages where Linux
-//! offers them.
+//! Zeroed `f32` frame buffers for image planes — the renderer's irradiance
+//! and standard errors, the sensor's outputs (DV, electrons, volts, mean
+//! electrons) — backed by transparent huge pages where Linux offers them.
 //!
 //! A 12-megapixel frame is 48 MB per buffer. A fresh `vec![0f32; n]` of that
 //! size is mapped lazily: the first write to each 4 KiB page faults, and the

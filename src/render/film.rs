@@ -159,7 +159,10 @@ pub fn render_world_at(
         grid.clone(),
     );
     // The render writes every irradiance value once: huge pages spare it
-    // the page faults of a fresh buffer (`frame_buffer`).
+    // the page faults of a fresh buffer (`frame_buffer`). Advised here, not
+    // in `OpticalImage::new`: on every optical image, `camsim bench sensor`'s
+    // 1.5 GB input on huge pages made its simulation slower (0.38 s against
+    // 0.32 s; docs/performance.md, *Twenty-fifth pass*).
     crate::frame_buffer::advise(&img.irradiance);
     img.stderr = crate::frame_buffer::zeroed(img.irradiance.len());
     img.label_names = label_names;
