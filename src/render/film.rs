@@ -705,7 +705,7 @@ impl RunJob<'_> {
                 packet_rays(&p.paths, p.alive, sc);
             }
             clock.lap(Stage::PacketRays);
-            stream.intersect(world, &mut scs);
+            stream.intersect(self.isa, world, &mut scs);
             clock.lap(Stage::ClosestHits);
             for (p, sc) in pk.iter_mut().zip(scs.iter_mut()) {
                 p.ended = shade_hits(
@@ -719,7 +719,7 @@ impl RunJob<'_> {
                 );
             }
             clock.lap(Stage::Shade);
-            stream.unoccluded(world, &scs, &mut unblocked);
+            stream.unoccluded(self.isa, world, &scs, &mut unblocked);
             clock.lap(Stage::ShadowRays);
             let mut sub = Clock::start();
             for ((p, sc), &free_lanes) in pk.iter_mut().zip(scs.iter_mut()).zip(&unblocked) {

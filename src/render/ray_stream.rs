@@ -9,7 +9,11 @@
 //! and cast 16 at a time in that order: rays leaving the same region in the
 //! same general direction meet the same nodes and leaves, so fewer nodes are
 //! visited per packet and more lanes are busy in each test. The results go
-//! back to the packets the rays came from.
+//! back to the packets the rays came from. In the AVX-512 kernel the
+//! regrouped packet is filled with one gather per ray component (seven for
+//! sixteen rays) instead of a load and a store per component and ray:
+//! 0.97–0.98 of the render's time (docs/performance.md, *Twenty-fifth
+//! pass*).
 //!
 //! Same bits: a ray's closest hit and its occlusion do not depend on the
 //! other rays of its packet (`bvh4_packet`'s kernels give every lane the
@@ -25,8 +29,96 @@
 
 use super::integrator::PacketScratch;
 use super::ray_packet::{LANES, LaneMask, PacketHits, RayPacket, lanes};
+use super::simd::RenderIsa;
 use super::world::World;
 use glam::Vec3;
+
+/// Which rays of the packets a cast takes.
+#[derive(Clone, Copy)]
+enum Cast {
+    /// The bounce rays (`PacketScratch::rays`).
+    Rays,
+    /// The next-event shadow rays (`PacketScratch::shadows`).
+    Shadows,
+}
+
+impl Cast {
+    #[inline(always)]
+    fn of(self, sc: &PacketScratch) -> &RayPacket {
+        match self {
+            Cast::Rays => &sc.rays,
+            Cast::Shadows => &sc.shadows,
+        }
+    }
+
+    /// Byte offset of the rays in a `PacketScratch`.
+    #[cfg(target_arch = "x86_64")]
+    fn offset(self) -> usize {
+        match self {
+            Cast::Rays => std::mem::offset_of!(PacketScratch, rays),
+            Cast::Shadows => std::mem::offset_of!(PacketScratch, shadows),
+        }
+    }
+}
+
+/// Floats in a `PacketScratch`: the gather's stride from one packet's rays
+/// to the next's.
+#[cfg(target_arch = "x86_64")]
+const SCRATCH_FLOATS: usize = std::mem::size_of::<PacketScratch>() / 4;
+#[cfg(target_arch = "x86_64")]
+const _: () = assert!(std::mem::size_of::<PacketScratch>().is_multiple_of(4));
+
+/// Most packets whose rays `gather_avx512` can address with 32-bit float
+/// offsets (far more than are ever in flight; more go the scalar way).
+#[cfg(target_arch = "x86_64")]
+const MAX_GATHER_PACKETS: usize = (i32::MAX as usize / SCRATCH_FLOATS) - 1;
+
+/// `RayStream::gather`'s copy for the AVX-512 kernel: ray `ids[k]` (packet
+/// × 16 + lane) of `cast.of(&scs[p])` into lane `k` of `pk`, one gather per
+/// ray component; lanes past `ids` are zeroed (inactive).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+fn gather_avx512(ids: &[u32], scs: &[PacketScratch], cast: Cast, pk: &mut RayPacket) {
+    use std::arch::x86_64::*;
+    debug_assert!(ids.len() <= LANES && scs.len() <= MAX_GATHER_PACKETS);
+    let m: __mmask16 = ((1u32 << ids.len()) - 1) as __mmask16;
+    // SAFETY: every id is p × 16 + l of a ray the sort took from `scs`
+    // (p < scs.len(), l < 16), so each gathered float — component `a`,
+    // lane `l` of packet p's rays, `p·SCRATCH_FLOATS + (offset + 64·a)/4 + l`
+    // floats past the start of `scs` — lies inside `scs`, whose pointer the
+    // base is derived from; the masked load reads `ids.len()` values; the
+    // offsets fit in i32 (`MAX_GATHER_PACKETS`); the stores write 16 floats
+    // of `pk`'s arrays.
+    unsafe {
+        let id = _mm512_maskz_loadu_epi32(m, ids.as_ptr().cast());
+        let p = _mm512_srli_epi32::<4>(id);
+        let l = _mm512_and_si512(id, _mm512_set1_epi32(LANES as i32 - 1));
+        let at = _mm512_add_epi32(
+            _mm512_mullo_epi32(p, _mm512_set1_epi32(SCRATCH_FLOATS as i32)),
+            l,
+        );
+        let base = scs.as_ptr().cast::<u8>().add(cast.offset()).cast::<f32>();
+        // Float `first + at[k]` past `base` for each lane k of `m` (0 elsewhere).
+        macro_rules! row {
+            ($first:expr) => {
+                _mm512_mask_i32gather_ps::<4>(
+                    _mm512_setzero_ps(),
+                    m,
+                    _mm512_add_epi32(at, _mm512_set1_epi32($first as i32)),
+                    base,
+                )
+            };
+        }
+        const O: usize = std::mem::offset_of!(RayPacket, o) / 4;
+        const D: usize = std::mem::offset_of!(RayPacket, d) / 4;
+        const T: usize = std::mem::offset_of!(RayPacket, tmax) / 4;
+        for a in 0..3 {
+            _mm512_storeu_ps(pk.o[a].as_mut_ptr(), row!(O + a * LANES));
+            _mm512_storeu_ps(pk.d[a].as_mut_ptr(), row!(D + a * LANES));
+        }
+        _mm512_storeu_ps(pk.tmax.as_mut_ptr(), row!(T));
+    }
+}
 
 /// Sort keys: 3 bits of direction octant, 2 bits of origin cell per axis.
 const KEYS: usize = 1 << 9;
@@ -135,15 +227,26 @@ impl RayStream {
     }
 
     /// Copy the next (up to) 16 rays of `order` from `start` — ray ids,
-    /// packet × 16 + lane, of `ray(p)` — into `self.packet`; returns where
-    /// the next packet starts.
+    /// packet × 16 + lane, of `cast.of(&scs[p])` — into `self.packet`;
+    /// returns where the next packet starts. The AVX-512 kernel gathers
+    /// each component of the 16 rays with one instruction.
     #[inline(always)]
-    fn gather<'a>(&mut self, start: usize, ray: impl Fn(usize) -> &'a RayPacket) -> usize {
+    fn gather(&mut self, isa: RenderIsa, start: usize, scs: &[PacketScratch], cast: Cast) -> usize {
         let end = (start + LANES).min(self.order.len());
+        let ids = &self.order[start..end];
         let pk = &mut self.packet;
-        for (k, &id) in self.order[start..end].iter().enumerate() {
+        #[cfg(target_arch = "x86_64")]
+        if isa == RenderIsa::Avx512 && scs.len() <= MAX_GATHER_PACKETS {
+            // SAFETY: the AVX-512 kernel runs only on a CPU with AVX-512F;
+            // `scs` is short enough for 32-bit float offsets.
+            unsafe { gather_avx512(ids, scs, cast, pk) };
+            pk.active = (1u32 << (end - start)) - 1;
+            return end;
+        }
+        let _ = isa;
+        for (k, &id) in ids.iter().enumerate() {
             let (p, l) = (id as usize / LANES, id as usize % LANES);
-            let r = ray(p);
+            let r = cast.of(&scs[p]);
             for a in 0..3 {
                 pk.o[a][k] = r.o[a][l];
                 pk.d[a][k] = r.d[a][l];
@@ -156,11 +259,11 @@ impl RayStream {
 
     /// The closest hit of every ray `scs[p].rays`, into `scs[p].hits`.
     #[inline(always)]
-    pub fn intersect(&mut self, world: &World, scs: &mut [PacketScratch]) {
+    pub fn intersect(&mut self, isa: RenderIsa, world: &World, scs: &mut [PacketScratch]) {
         self.sort(scs.len(), |p| &scs[p].rays);
         let mut start = 0;
         while start < self.order.len() {
-            let end = self.gather(start, |p| &scs[p].rays);
+            let end = self.gather(isa, start, scs, Cast::Rays);
             world.accel.intersect_packet(&self.packet, &mut self.hits);
             for (k, &id) in self.order[start..end].iter().enumerate() {
                 let (p, l) = (id as usize / LANES, id as usize % LANES);
@@ -173,12 +276,18 @@ impl RayStream {
 
     /// Which shadow rays `scs[p].shadows` are unblocked: `free[p]`.
     #[inline(always)]
-    pub fn unoccluded(&mut self, world: &World, scs: &[PacketScratch], free: &mut [LaneMask]) {
+    pub fn unoccluded(
+        &mut self,
+        isa: RenderIsa,
+        world: &World,
+        scs: &[PacketScratch],
+        free: &mut [LaneMask],
+    ) {
         free.fill(0);
         self.sort(scs.len(), |p| &scs[p].shadows);
         let mut start = 0;
         while start < self.order.len() {
-            let end = self.gather(start, |p| &scs[p].shadows);
+            let end = self.gather(isa, start, scs, Cast::Shadows);
             let f = world.accel.unoccluded_packet(&self.packet);
             for k in lanes(f) {
                 let id = self.order[start + k] as usize;
