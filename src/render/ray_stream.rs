@@ -13,7 +13,8 @@
 //! regrouped packet is filled with one gather per ray component (seven for
 //! sixteen rays) instead of a load and a store per component and ray:
 //! 0.97–0.98 of the render's time (docs/performance.md, *Twenty-fifth
-//! pass*).
+//! pass*); where the CPU also has conflict detection and a vector popcount,
+//! the counting sort counts and places sixteen rays at a time (0.98).
 //!
 //! Same bits: a ray's closest hit and its occlusion do not depend on the
 //! other rays of its packet (`bvh4_packet`'s kernels give every lane the
@@ -120,6 +121,82 @@ fn gather_avx512(ids: &[u32], scs: &[PacketScratch], cast: Cast, pk: &mut RayPac
     }
 }
 
+/// The CPU has AVX-512F, CD (conflict detection) and VPOPCNTDQ, which
+/// `sort_avx512` uses.
+fn conflict_sort_supported() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx512cd")
+            && std::arch::is_x86_feature_detected!("avx512vpopcntdq")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
+/// `RayStream::sort`'s counting and placing, sixteen rays at a time: each
+/// active lane's rank among the earlier active lanes of its packet with the
+/// same key (`vpconflictd`, then a popcount) plus the count of its key so
+/// far (a gather), the counts written back by a scatter (of lanes with one
+/// key, the last lane's write lands: scatters write in lane order); then
+/// each ray's place, its key's start plus its rank, scattered into `order`.
+/// The same stable order as the scalar loops, without their chain through
+/// `counts[k] += 1`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512cd,avx512vpopcntdq")]
+fn sort_avx512(rs: &mut RayStream, scs: &[PacketScratch], cast: Cast) {
+    use std::arch::x86_64::*;
+    let n = scs.len();
+    debug_assert!(rs.rank.len() >= n * LANES && rs.keys.len() >= n * LANES);
+    // SAFETY: keys are below KEYS (`keys_of`), so `counts[k + 1]` is inside
+    // `counts` (KEYS + 1 entries); ranks and keys are read and written at
+    // p·16 + lane, p < n, inside `rank` and `keys` (`new` sized them for
+    // every packet); each place is below the rays' total, `order`'s length.
+    unsafe {
+        let one = _mm512_set1_epi32(1);
+        let lane_ids = _mm512_set_epi32(15, 14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0);
+        for p in 0..n {
+            let m = cast.of(&scs[p]).active as __mmask16;
+            let k =
+                _mm512_cvtepu16_epi32(_mm256_loadu_si256(rs.keys.as_ptr().add(p * LANES).cast()));
+            let k1 = _mm512_add_epi32(k, one);
+            let earlier = _mm512_and_si512(_mm512_conflict_epi32(k), _mm512_set1_epi32(m as i32));
+            let before = _mm512_popcnt_epi32(earlier);
+            let c = _mm512_mask_i32gather_epi32::<4>(
+                _mm512_setzero_si512(),
+                m,
+                k1,
+                rs.counts.as_ptr().cast(),
+            );
+            let rank = _mm512_add_epi32(c, before);
+            _mm512_mask_storeu_epi32(rs.rank.as_mut_ptr().add(p * LANES).cast(), m, rank);
+            _mm512_mask_i32scatter_epi32::<4>(
+                rs.counts.as_mut_ptr().cast(),
+                m,
+                k1,
+                _mm512_add_epi32(rank, one),
+            );
+        }
+        let total = rs.starts();
+        rs.order.resize(total, 0);
+        for p in 0..n {
+            let m = cast.of(&scs[p]).active as __mmask16;
+            let k =
+                _mm512_cvtepu16_epi32(_mm256_loadu_si256(rs.keys.as_ptr().add(p * LANES).cast()));
+            let start = _mm512_mask_i32gather_epi32::<4>(
+                _mm512_setzero_si512(),
+                m,
+                k,
+                rs.counts.as_ptr().cast(),
+            );
+            let rank = _mm512_maskz_loadu_epi32(m, rs.rank.as_ptr().add(p * LANES).cast());
+            let place = _mm512_add_epi32(start, rank);
+            let id = _mm512_add_epi32(lane_ids, _mm512_set1_epi32((p * LANES) as i32));
+            _mm512_mask_i32scatter_epi32::<4>(rs.order.as_mut_ptr().cast(), m, place, id);
+        }
+    }
+}
+
 /// Sort keys: 3 bits of direction octant, 2 bits of origin cell per axis.
 const KEYS: usize = 1 << 9;
 
@@ -135,6 +212,10 @@ pub struct RayStream {
     keys: Vec<u16>,
     /// Rays in key order.
     order: Vec<u32>,
+    /// Per ray: how many rays before it have its key (`sort_avx512`).
+    rank: Vec<u32>,
+    /// The CPU has what `sort_avx512` needs.
+    conflict_sort: bool,
     packet: RayPacket,
     hits: PacketHits,
 }
@@ -157,6 +238,8 @@ impl RayStream {
             counts: vec![0; KEYS + 1],
             keys: vec![0; packets * LANES],
             order: Vec::with_capacity(packets * LANES),
+            rank: vec![0; packets * LANES],
+            conflict_sort: conflict_sort_supported(),
             packet: RayPacket::default(),
             hits: PacketHits::default(),
         }
@@ -192,38 +275,57 @@ impl RayStream {
         }
     }
 
-    /// Sort the active rays of `ray(p)` for every packet p into `order`
-    /// (a stable counting sort by key).
+    /// Sort the active rays of `cast.of(&scs[p])` for every packet p into
+    /// `order` (a stable counting sort by key). The AVX-512 kernel counts and
+    /// places sixteen rays at a time where the CPU has conflict detection
+    /// and vector popcount (`sort_avx512`); the result is the same order.
     #[inline(always)]
-    fn sort<'a>(&mut self, n: usize, ray: impl Fn(usize) -> &'a RayPacket) {
+    fn sort(&mut self, isa: RenderIsa, scs: &[PacketScratch], cast: Cast) {
+        let n = scs.len();
         self.counts.fill(0);
         for p in 0..n {
-            let r = ray(p);
             let mut k = [0u16; LANES];
-            self.keys_of(r, &mut k);
+            self.keys_of(cast.of(&scs[p]), &mut k);
             self.keys[p * LANES..(p + 1) * LANES].copy_from_slice(&k);
-            for l in lanes(r.active) {
-                self.counts[k[l] as usize + 1] += 1;
+        }
+        #[cfg(target_arch = "x86_64")]
+        if isa == RenderIsa::Avx512 && self.conflict_sort && n <= MAX_GATHER_PACKETS {
+            // SAFETY: `conflict_sort` is set only where the CPU has
+            // AVX-512F, CD and VPOPCNTDQ; ray ids fit in i32 below
+            // `MAX_GATHER_PACKETS` packets.
+            unsafe { sort_avx512(self, scs, cast) };
+            return;
+        }
+        let _ = isa;
+        for p in 0..n {
+            for l in lanes(cast.of(&scs[p]).active) {
+                self.counts[self.keys[p * LANES + l] as usize + 1] += 1;
             }
         }
-        // The first place of each key (counts[k + 1] held key k's count): a
-        // running sum in a register, not `counts[k + 1] += counts[k]`, whose
-        // every step waited on the store before it (2.3 % of perf's samples).
-        let mut start = 0u32;
-        for c in self.counts.iter_mut() {
-            start += *c;
-            *c = start;
-        }
-        let total = self.counts[KEYS] as usize;
+        let total = self.starts();
         self.order.resize(total, 0);
         for p in 0..n {
-            for l in lanes(ray(p).active) {
+            for l in lanes(cast.of(&scs[p]).active) {
                 let id = p * LANES + l;
                 let k = self.keys[id] as usize;
                 self.order[self.counts[k] as usize] = id as u32;
                 self.counts[k] += 1;
             }
         }
+    }
+
+    /// With `counts[k + 1]` holding key k's count: the first place of each
+    /// key into `counts[k]`; returns the rays' total. A running sum in a
+    /// register, not `counts[k + 1] += counts[k]`, whose every step waited
+    /// on the store before it (2.3 % of perf's samples).
+    #[inline(always)]
+    fn starts(&mut self) -> usize {
+        let mut start = 0u32;
+        for c in self.counts.iter_mut() {
+            start += *c;
+            *c = start;
+        }
+        self.counts[KEYS] as usize
     }
 
     /// Copy the next (up to) 16 rays of `order` from `start` — ray ids,
@@ -260,7 +362,7 @@ impl RayStream {
     /// The closest hit of every ray `scs[p].rays`, into `scs[p].hits`.
     #[inline(always)]
     pub fn intersect(&mut self, isa: RenderIsa, world: &World, scs: &mut [PacketScratch]) {
-        self.sort(scs.len(), |p| &scs[p].rays);
+        self.sort(isa, scs, Cast::Rays);
         let mut start = 0;
         while start < self.order.len() {
             let end = self.gather(isa, start, scs, Cast::Rays);
@@ -284,7 +386,7 @@ impl RayStream {
         free: &mut [LaneMask],
     ) {
         free.fill(0);
-        self.sort(scs.len(), |p| &scs[p].shadows);
+        self.sort(isa, scs, Cast::Shadows);
         let mut start = 0;
         while start < self.order.len() {
             let end = self.gather(isa, start, scs, Cast::Shadows);
