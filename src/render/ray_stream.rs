@@ -399,3 +399,102 @@ impl RayStream {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::BvhKind;
+    use crate::render::sampling::Rng;
+    use crate::scene::shapes::quad;
+    use crate::scene::{Material, Scene};
+    use crate::spectrum::{Spectrum, WavelengthGrid};
+    use glam::DVec3;
+
+    /// At every level this machine has, the sort puts each active ray once,
+    /// by key, rays of one key in packet-and-lane order (checked against the
+    /// keys themselves, not against another sort), and the regrouped packets
+    /// hold exactly those rays' origins, directions and far ends.
+    #[test]
+    fn sort_and_gather_follow_the_keys_at_every_level() {
+        let mut scene = Scene::default();
+        let m = scene.material(
+            "m",
+            Material::Diffuse {
+                reflectance: Spectrum::constant("r", 0.5),
+            },
+        );
+        let o = scene.object("floor");
+        scene
+            .meshes
+            .push(quad(DVec3::ZERO, DVec3::X, DVec3::Y, m, o, None));
+        let grid = WavelengthGrid::new(500.0, 600.0, 50.0).unwrap();
+        let world = World::build(&scene, &grid, BvhKind::Bvh4).unwrap();
+        let n = 7;
+        let mut rng = Rng::for_sample(3, 0, 0);
+        let mut scs: Vec<PacketScratch> = (0..n)
+            .map(|_| PacketScratch::new(world.bands_padded))
+            .collect();
+        for sc in &mut scs {
+            for r in [&mut sc.rays, &mut sc.shadows] {
+                // Three origins and three directions, so that keys repeat
+                // within a packet (the ranks among equal keys matter).
+                let os = [Vec3::ZERO, Vec3::new(0.4, -0.3, 0.2), Vec3::splat(-0.5)];
+                let ds = [
+                    Vec3::Z,
+                    Vec3::new(-1.0, 0.5, -0.2),
+                    Vec3::new(0.3, -0.7, 0.1),
+                ];
+                for l in 0..LANES {
+                    let i = (rng.uniform() * 3.0) as usize % 3;
+                    let j = (rng.uniform() * 3.0) as usize % 3;
+                    let jitter = Vec3::splat(1e-3 * l as f32);
+                    r.set(l, os[i] + jitter, ds[j], 1.0 + l as f32);
+                }
+                // Some lanes idle.
+                r.active = (rng.uniform() * 65536.0) as u32 & 0xffff;
+            }
+        }
+        // Keys do repeat within packets.
+        let mut k = [0u16; LANES];
+        RayStream::new(&world, n).keys_of(&scs[0].rays, &mut k);
+        assert!((1..LANES).any(|l| k[..l].contains(&k[l])), "keys {k:?}");
+        for isa in RenderIsa::ALL.into_iter().filter(|i| i.supported()) {
+            for cast in [Cast::Rays, Cast::Shadows] {
+                let mut rs = RayStream::new(&world, n);
+                rs.sort(isa, &scs, cast);
+                let want: usize = scs
+                    .iter()
+                    .map(|s| cast.of(s).active.count_ones() as usize)
+                    .sum();
+                assert_eq!(rs.order.len(), want, "{isa:?}");
+                let key = |id: u32| rs.keys[id as usize];
+                for w in rs.order.windows(2) {
+                    let (a, b) = (w[0], w[1]);
+                    assert!(
+                        key(a) < key(b) || (key(a) == key(b) && a < b),
+                        "{isa:?}: {a} (key {}) before {b} (key {})",
+                        key(a),
+                        key(b)
+                    );
+                }
+                for &id in &rs.order {
+                    let (p, l) = (id as usize / LANES, id as usize % LANES);
+                    assert!(
+                        cast.of(&scs[p]).active >> l & 1 == 1,
+                        "{isa:?}: idle ray {id}"
+                    );
+                }
+                let mut start = 0;
+                while start < rs.order.len() {
+                    let end = rs.gather(isa, start, &scs, cast);
+                    for (k, &id) in rs.order[start..end].iter().enumerate() {
+                        let (p, l) = (id as usize / LANES, id as usize % LANES);
+                        assert_eq!(rs.packet.get(k), cast.of(&scs[p]).get(l), "{isa:?}");
+                    }
+                    assert_eq!(rs.packet.active, (1 << (end - start)) - 1);
+                    start = end;
+                }
+            }
+        }
+    }
+}
