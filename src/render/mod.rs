@@ -93,6 +93,7 @@ pub mod bvh4_packet;
 mod bvh4_packet_avx512;
 pub mod film;
 pub mod geometry;
+mod hit_lanes_avx512;
 pub mod integrator;
 mod lanes;
 pub mod output;

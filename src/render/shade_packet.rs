@@ -39,6 +39,8 @@
 use super::bands;
 use super::bsdf::Bsdf;
 use super::geometry::{HIT_POINT_GAMMA, Shape, offset_ray_origin, triangle_point};
+#[cfg(target_arch = "x86_64")]
+use super::hit_lanes_avx512::{self, HitLanes};
 use super::path::{PathState, SHADOW_EPS, ShadowRay, add_emitted, roulette};
 use super::ray_packet::{LANES, LaneMask, PacketHits, RayPacket, lanes};
 use super::sampler::Sampler;
@@ -137,35 +139,75 @@ pub(super) fn shade_diffuse(
     let mut emitters: LaneMask = 0;
     // Lanes whose bounce draws are all Sobol points (`Sampler::bounce_is_sobol`).
     let mut sobol: LaneMask = 0;
-    for i in lanes(todo) {
-        let prim = hits.prim[i];
-        let Shape::Triangle { p } = world.accel.shapes[prim as usize] else {
-            unreachable!("shade_diffuse is given triangles only (World::hit_kind)")
-        };
-        for (k, vk) in v.iter_mut().enumerate() {
-            vk.set(i, p[k]);
-            bary[k][i] = hits.h[i].b[k];
-        }
-        ng.set(i, world.triangle_normal(prim));
-        dir.set(i, st[i].d);
-        let info = world.info[prim as usize];
-        if info.normals != u32::MAX {
-            let n3 = world.normals[info.normals as usize];
-            for (k, vk) in vn.iter_mut().enumerate() {
-                vk.set(i, n3[k]);
+    #[cfg(target_arch = "x86_64")]
+    let gathered = isa == RenderIsa::Avx512 && hit_lanes_avx512::fits(world);
+    #[cfg(not(target_arch = "x86_64"))]
+    let gathered = false;
+    if gathered {
+        #[cfg(target_arch = "x86_64")]
+        {
+            let [v0, v1, v2] = &mut v;
+            let masks = {
+                let out = HitLanes {
+                    v: [
+                        &mut v0.x, &mut v0.y, &mut v0.z, &mut v1.x, &mut v1.y, &mut v1.z,
+                        &mut v2.x, &mut v2.y, &mut v2.z,
+                    ],
+                    bary: &mut bary,
+                    ng: [&mut ng.x, &mut ng.y, &mut ng.z],
+                    dir: [&mut dir.x, &mut dir.y, &mut dir.z],
+                };
+                // SAFETY: the AVX-512 kernel runs only where the CPU has
+                // AVX-512F; `fits` checked above; the lanes of `todo` hit
+                // triangles of `world` (`World::hit_kind`).
+                unsafe { hit_lanes_avx512::hit_lanes(world, st, hits, todo, max_bounces, out) }
+            };
+            for i in lanes(masks.with_normals) {
+                let n3 = world.normals[world.info[hits.prim[i] as usize].normals as usize];
+                for (k, vk) in vn.iter_mut().enumerate() {
+                    vk.set(i, n3[k]);
+                }
+                has_n[i] = true;
             }
-            has_n[i] = true;
-            with_normals |= 1 << i;
+            with_normals = masks.with_normals;
+            emitters = masks.emitters;
+            ended = masks.at_max_depth;
+            go = todo & !masks.at_max_depth;
+            for i in lanes(go) {
+                sobol |= (smp[i].bounce_is_sobol() as LaneMask) << i;
+            }
         }
-        if info.light != u32::MAX {
-            emitters |= 1 << i;
+    } else {
+        for i in lanes(todo) {
+            let prim = hits.prim[i];
+            let Shape::Triangle { p } = world.accel.shapes[prim as usize] else {
+                unreachable!("shade_diffuse is given triangles only (World::hit_kind)")
+            };
+            for (k, vk) in v.iter_mut().enumerate() {
+                vk.set(i, p[k]);
+                bary[k][i] = hits.h[i].b[k];
+            }
+            ng.set(i, world.triangle_normal(prim));
+            dir.set(i, st[i].d);
+            let info = world.info[prim as usize];
+            if info.normals != u32::MAX {
+                let n3 = world.normals[info.normals as usize];
+                for (k, vk) in vn.iter_mut().enumerate() {
+                    vk.set(i, n3[k]);
+                }
+                has_n[i] = true;
+                with_normals |= 1 << i;
+            }
+            if info.light != u32::MAX {
+                emitters |= 1 << i;
+            }
+            if st[i].depth >= max_bounces {
+                ended |= 1 << i;
+                continue;
+            }
+            go |= 1 << i;
+            sobol |= (smp[i].bounce_is_sobol() as LaneMask) << i;
         }
-        if st[i].depth >= max_bounces {
-            ended |= 1 << i;
-            continue;
-        }
-        go |= 1 << i;
-        sobol |= (smp[i].bounce_is_sobol() as LaneMask) << i;
     }
     // The bounce's draws (the lobe's is taken and not used): the lanes
     // whose draws are all Sobol points, then the others.

@@ -578,6 +578,12 @@ impl World {
         self.tri_ng[prim as usize]
     }
 
+    /// The triangle normals as floats, three per primitive (x, y, z), for
+    /// the AVX-512 kernel's gathers (`hit_lanes_avx512`).
+    pub(super) fn tri_ng_ptr(&self) -> *const f32 {
+        self.tri_ng.as_ptr().cast()
+    }
+
     /// The light that draw `u` selects, its selection probability, and `u`
     /// remapped to [0, 1) within the light's slice of the table, so one 2-D
     /// point both picks the light and places the sample on it (a stratified
