@@ -702,7 +702,7 @@ impl RunJob<'_> {
                 break;
             }
             for (p, sc) in pk.iter().zip(scs.iter_mut()) {
-                packet_rays(&p.paths, p.alive, sc);
+                packet_rays(self.isa, &p.paths, p.alive, sc);
             }
             clock.lap(Stage::PacketRays);
             stream.intersect(self.isa, world, &mut scs);

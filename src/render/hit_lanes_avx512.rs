@@ -20,7 +20,7 @@
 
 use super::geometry::{PrimHit, Shape};
 use super::path::PathState;
-use super::ray_packet::{LANES, LaneMask, PacketHits};
+use super::ray_packet::{LANES, LaneMask, PacketHits, RayPacket};
 use super::world::{PrimInfo, World};
 use glam::Vec3;
 use std::mem::{offset_of, size_of};
@@ -179,4 +179,38 @@ pub(super) unsafe fn hit_lanes(
             ) as LaneMask,
         }
     }
+}
+
+/// `integrator::packet_rays` for the AVX-512 kernel: the rays of the lanes
+/// `alive` — origin and direction from their path states, far end ∞ — into
+/// `rays`, one gather per component; the other lanes keep their values, as
+/// in the lane loop.
+///
+/// # Safety
+/// The CPU has AVX-512F.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+pub(super) unsafe fn packet_rays(st: &[PathState; LANES], alive: LaneMask, rays: &mut RayPacket) {
+    use std::arch::x86_64::*;
+    let m = alive as __mmask16;
+    // SAFETY: lane indices below 16 address `st`'s 16 states from its own
+    // pointer; loads and stores are of 16-float arrays.
+    unsafe {
+        let lane = _mm512_mullo_epi32(
+            _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15),
+            _mm512_set1_epi32(STATE_FLOATS as i32),
+        );
+        let sp = st.as_ptr().cast::<u8>();
+        let o = sp.add(offset_of!(PathState, o)).cast::<f32>();
+        let d = sp.add(offset_of!(PathState, d)).cast::<f32>();
+        for a in 0..3 {
+            let idx = _mm512_add_epi32(lane, _mm512_set1_epi32(a as i32));
+            let go = _mm512_mask_i32gather_ps::<4>(_mm512_loadu_ps(rays.o[a].as_ptr()), m, idx, o);
+            _mm512_storeu_ps(rays.o[a].as_mut_ptr(), go);
+            let gd = _mm512_mask_i32gather_ps::<4>(_mm512_loadu_ps(rays.d[a].as_ptr()), m, idx, d);
+            _mm512_storeu_ps(rays.d[a].as_mut_ptr(), gd);
+        }
+        _mm512_mask_storeu_ps(rays.tmax.as_mut_ptr(), m, _mm512_set1_ps(f32::INFINITY));
+    }
+    rays.active = alive;
 }

@@ -312,9 +312,17 @@ impl PacketScratch {
 // traced bounce by bounce this way, in any lane and beside any other paths,
 // gives `trace`'s bits.
 
-/// A bounce's first step: the rays of the lanes `alive` into `sc.rays`.
+/// A bounce's first step: the rays of the lanes `alive` into `sc.rays`
+/// (gathered in the AVX-512 kernel).
 #[inline(always)]
-pub fn packet_rays(st: &[PathState; LANES], alive: LaneMask, sc: &mut PacketScratch) {
+pub fn packet_rays(isa: RenderIsa, st: &[PathState; LANES], alive: LaneMask, sc: &mut PacketScratch) {
+    #[cfg(target_arch = "x86_64")]
+    if isa == RenderIsa::Avx512 {
+        // SAFETY: the AVX-512 kernel runs only where the CPU has AVX-512F.
+        unsafe { super::hit_lanes_avx512::packet_rays(st, alive, &mut sc.rays) };
+        return;
+    }
+    let _ = isa;
     sc.rays.active = 0;
     for i in lanes(alive) {
         sc.rays.set(i, st[i].o, st[i].d, f32::INFINITY);
