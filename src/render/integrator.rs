@@ -315,7 +315,12 @@ impl PacketScratch {
 /// A bounce's first step: the rays of the lanes `alive` into `sc.rays`
 /// (gathered in the AVX-512 kernel).
 #[inline(always)]
-pub fn packet_rays(isa: RenderIsa, st: &[PathState; LANES], alive: LaneMask, sc: &mut PacketScratch) {
+pub fn packet_rays(
+    isa: RenderIsa,
+    st: &[PathState; LANES],
+    alive: LaneMask,
+    sc: &mut PacketScratch,
+) {
     #[cfg(target_arch = "x86_64")]
     if isa == RenderIsa::Avx512 {
         // SAFETY: the AVX-512 kernel runs only where the CPU has AVX-512F.

@@ -297,6 +297,97 @@ impl Sampler {
     }
 }
 
+/// The bounce draws of one packet's lanes (`shade_packet::shade_diffuse`'s
+/// arrays): light point, BSDF direction, Russian roulette.
+pub(super) struct LaneDraws<'a> {
+    pub light: [&'a mut [f32; 16]; 2],
+    pub dir: [&'a mut [f32; 16]; 2],
+    pub rr: &'a mut [f32; 16],
+}
+
+/// Floats in a `Sampler`: the gathers' stride from one lane's sampler to
+/// the next.
+#[cfg(target_arch = "x86_64")]
+const SAMPLER_FLOATS: usize = std::mem::size_of::<Sampler>() / 4;
+#[cfg(target_arch = "x86_64")]
+const _: () = assert!(std::mem::size_of::<Sampler>().is_multiple_of(4));
+
+/// For the AVX-512 kernel: of the lanes `go` of a packet's samplers `smps`,
+/// those whose next bounce's draws are all Sobol points
+/// (`bounce_is_sobol`) take them as `bounce_draws_sobol` does — the same
+/// floats, into `out` (the lobe's draw is taken and not used, as in
+/// `shade_diffuse`) — one gather per draw for the sixteen lanes instead of
+/// a load and a store per draw and lane. Returns those lanes; the others'
+/// samplers and `out` lanes are untouched.
+///
+/// # Safety
+/// The CPU has AVX-512F.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+pub(super) unsafe fn bounce_draws_sobol_lanes(
+    smps: &mut [Sampler; 16],
+    go: u32,
+    out: LaneDraws<'_>,
+) -> u32 {
+    use std::arch::x86_64::*;
+    use std::mem::offset_of;
+    // SAFETY: lane l's offsets address sampler l of `smps` (from its own
+    // pointer): its `draw` and `ld_draws` (the low 32 bits, little endian;
+    // both stay far below 2³²) and, for Sobol lanes, `x[d..d + 4]` and
+    // `y[d..d + 4]` with d ≤ LANES − 4, as `bounce_draws_sobol` bounds it.
+    // The stores write 16-float arrays under the lanes' mask.
+    unsafe {
+        let lane = _mm512_mullo_epi32(
+            _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15),
+            _mm512_set1_epi32(SAMPLER_FLOATS as i32),
+        );
+        let base = smps.as_mut_ptr().cast::<u8>();
+        let word = |off: usize| base.add(off).cast::<i32>();
+        let g = go as __mmask16;
+        let draw = _mm512_mask_i32gather_epi32::<4>(
+            _mm512_setzero_si512(),
+            g,
+            lane,
+            word(offset_of!(Sampler, draw)),
+        );
+        let ld = _mm512_mask_i32gather_epi32::<4>(
+            _mm512_setzero_si512(),
+            g,
+            lane,
+            word(offset_of!(Sampler, ld_draws)),
+        );
+        let four = _mm512_set1_epi32(4);
+        let m = _mm512_mask_cmple_epu32_mask(g, _mm512_add_epi32(draw, four), ld);
+        let d = _mm512_min_epu32(draw, _mm512_set1_epi32(LANES as i32 - 4));
+        let at = _mm512_add_epi32(lane, d);
+        let take = |field: usize, k: i32, dst: &mut [f32; 16]| {
+            let v = _mm512_mask_i32gather_ps::<4>(
+                _mm512_setzero_ps(),
+                m,
+                _mm512_add_epi32(at, _mm512_set1_epi32(k)),
+                base.add(field).cast::<f32>(),
+            );
+            _mm512_mask_storeu_ps(dst.as_mut_ptr(), m, v);
+        };
+        let (x, y) = (offset_of!(Sampler, x), offset_of!(Sampler, y));
+        let LaneDraws { light, dir, rr } = out;
+        let [l0, l1] = light;
+        let [d0, d1] = dir;
+        take(x, 0, l0);
+        take(y, 0, l1);
+        take(x, 2, d0);
+        take(y, 2, d1);
+        take(x, 3, rr);
+        _mm512_mask_i32scatter_epi32::<4>(
+            word(offset_of!(Sampler, draw)),
+            m,
+            lane,
+            _mm512_add_epi32(d, four),
+        );
+        m as u32
+    }
+}
+
 /// reverse(sobol1(i)): the XOR of the bit-reversed columns wⱼ (below) that
 /// the bits of `i` select. Bit k of wⱼ is C(j, k) mod 2, odd exactly when
 /// the bits of k are a subset of those of j (Lucas), so bit k of the result

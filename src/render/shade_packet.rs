@@ -44,6 +44,8 @@ use super::hit_lanes_avx512::{self, HitLanes};
 use super::path::{PathState, SHADOW_EPS, ShadowRay, add_emitted, roulette};
 use super::ray_packet::{LANES, LaneMask, PacketHits, RayPacket, lanes};
 use super::sampler::Sampler;
+#[cfg(target_arch = "x86_64")]
+use super::sampler::{LaneDraws, bounce_draws_sobol_lanes};
 use super::sampling::{Frame, cosine_hemisphere, power_heuristic, uniform_triangle};
 use super::simd::RenderIsa;
 use super::stages::{Clock, Stage};
@@ -173,9 +175,6 @@ pub(super) fn shade_diffuse(
             emitters = masks.emitters;
             ended = masks.at_max_depth;
             go = todo & !masks.at_max_depth;
-            for i in lanes(go) {
-                sobol |= (smp[i].bounce_is_sobol() as LaneMask) << i;
-            }
         }
     } else {
         for i in lanes(todo) {
@@ -206,14 +205,37 @@ pub(super) fn shade_diffuse(
                 continue;
             }
             go |= 1 << i;
-            sobol |= (smp[i].bounce_is_sobol() as LaneMask) << i;
         }
     }
     // The bounce's draws (the lobe's is taken and not used): the lanes
-    // whose draws are all Sobol points, then the others.
-    for i in lanes(go & sobol) {
-        let d = smp[i].bounce_draws_sobol();
-        ((u1[i], u2[i]), (v1[i], v2[i]), u_rr[i]) = (d.light, d.dir, d.rr);
+    // whose draws are all Sobol points, then the others. The AVX-512 kernel
+    // takes the Sobol lanes' draws with gathers (`bounce_draws_sobol_lanes`).
+    let lane_samplers = if gathered {
+        <&mut [Sampler; LANES]>::try_from(&mut *smp).ok()
+    } else {
+        None
+    };
+    if let Some(smps) = lane_samplers {
+        #[cfg(target_arch = "x86_64")]
+        {
+            let out = LaneDraws {
+                light: [&mut u1, &mut u2],
+                dir: [&mut v1, &mut v2],
+                rr: &mut u_rr,
+            };
+            // SAFETY: the AVX-512 kernel runs only where the CPU has AVX-512F.
+            sobol = unsafe { bounce_draws_sobol_lanes(smps, go, out) };
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = smps;
+    } else {
+        for i in lanes(go) {
+            sobol |= (smp[i].bounce_is_sobol() as LaneMask) << i;
+        }
+        for i in lanes(go & sobol) {
+            let d = smp[i].bounce_draws_sobol();
+            ((u1[i], u2[i]), (v1[i], v2[i]), u_rr[i]) = (d.light, d.dir, d.rr);
+        }
     }
     for i in lanes(go & !sobol) {
         let d = smp[i].bounce_draws();
