@@ -300,9 +300,9 @@ pub(super) unsafe fn intersect_packet(
     rays: &RayPacket,
     out: &mut PacketHits,
 ) {
-    *out = PacketHits::default();
     let active = rays.active & ALL_LANES;
     if active == 0 {
+        *out = PacketHits::default();
         return;
     }
     let pre = super::bvh4_packet::PacketPre::new(rays);
@@ -420,18 +420,72 @@ pub(super) unsafe fn intersect_packet(
                 }
             }
         }
-        let (bt, bb) = (st(best_t), [st(best_b[0]), st(best_b[1]), st(best_b[2])]);
-        let mut bp = [0u32; LANES];
-        _mm512_storeu_si512(bp.as_mut_ptr().cast(), best_prim);
-        for l in 0..LANES {
-            if active & (1 << l) != 0 && bp[l] != EMPTY {
-                out.prim[l] = bp[l];
-                out.h[l] = PrimHit {
-                    t: bt[l],
-                    b: [bb[0][l], bb[1][l], bb[2][l]],
-                };
-            }
-        }
+        write_hits(active, best_t, best_b, best_prim, out);
+    }
+}
+
+/// The packet's closest hits into `out`: for each lane of `active` with a
+/// hit, its primitive and (t, barycentrics); every other lane as
+/// `PacketHits::default()` leaves it (no primitive, zeros). The sixteen
+/// `PrimHit`s are written as four registers — (t, b₀, b₁, b₂) transposed
+/// from the lanes' columns — instead of five scalar stores a lane.
+#[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512dq")]
+#[inline]
+unsafe fn write_hits(
+    active: LaneMask,
+    t: __m512,
+    b: [__m512; 3],
+    prim: __m512i,
+    out: &mut PacketHits,
+) {
+    const _: () = assert!(
+        std::mem::offset_of!(PrimHit, t) == 0
+            && std::mem::offset_of!(PrimHit, b) == 4
+            && std::mem::size_of::<PrimHit>() == 16
+            && std::mem::size_of::<[PrimHit; LANES]>() == 4 * 64
+    );
+    // SAFETY: AVX-512F (enabled here); the stores write `out.prim`'s 16
+    // words and `out.h`'s 16 × 16 bytes.
+    unsafe {
+        let none = _mm512_set1_epi32(EMPTY as i32);
+        let hit = (active as __mmask16) & _mm512_cmpneq_epi32_mask(prim, none);
+        _mm512_storeu_si512(
+            out.prim.as_mut_ptr().cast(),
+            _mm512_mask_mov_epi32(none, hit, prim),
+        );
+        let zero = _mm512_setzero_ps();
+        let c = [
+            _mm512_mask_mov_ps(zero, hit, t),
+            _mm512_mask_mov_ps(zero, hit, b[0]),
+            _mm512_mask_mov_ps(zero, hit, b[1]),
+            _mm512_mask_mov_ps(zero, hit, b[2]),
+        ];
+        // 4 × 4 transposes within each 128-bit block: block q of row r holds
+        // lane 4q + r's (t, b₀, b₁, b₂).
+        let t01l = _mm512_unpacklo_ps(c[0], c[1]); // t0 b0_0 t1 b0_1 | …
+        let t01h = _mm512_unpackhi_ps(c[0], c[1]); // t2 b0_2 t3 b0_3 | …
+        let t23l = _mm512_unpacklo_ps(c[2], c[3]);
+        let t23h = _mm512_unpackhi_ps(c[2], c[3]);
+        let pd = _mm512_castps_pd;
+        let ps = _mm512_castpd_ps;
+        let r0 = ps(_mm512_unpacklo_pd(pd(t01l), pd(t23l))); // lane 4q
+        let r1 = ps(_mm512_unpackhi_pd(pd(t01l), pd(t23l))); // lane 4q + 1
+        let r2 = ps(_mm512_unpacklo_pd(pd(t01h), pd(t23h))); // lane 4q + 2
+        let r3 = ps(_mm512_unpackhi_pd(pd(t01h), pd(t23h))); // lane 4q + 3
+        // Output register q holds lanes 4q … 4q + 3: block q of r0 … r3.
+        let a01 = _mm512_shuffle_f32x4::<0b01_00_01_00>(r0, r1); // r0.q0 r0.q1 r1.q0 r1.q1
+        let a23 = _mm512_shuffle_f32x4::<0b01_00_01_00>(r2, r3);
+        let b01 = _mm512_shuffle_f32x4::<0b11_10_11_10>(r0, r1); // r0.q2 r0.q3 r1.q2 r1.q3
+        let b23 = _mm512_shuffle_f32x4::<0b11_10_11_10>(r2, r3);
+        let o0 = _mm512_shuffle_f32x4::<0b10_00_10_00>(a01, a23); // r0.q0 r1.q0 r2.q0 r3.q0
+        let o1 = _mm512_shuffle_f32x4::<0b11_01_11_01>(a01, a23); // … q1
+        let o2 = _mm512_shuffle_f32x4::<0b10_00_10_00>(b01, b23);
+        let o3 = _mm512_shuffle_f32x4::<0b11_01_11_01>(b01, b23);
+        let h = out.h.as_mut_ptr().cast::<f32>();
+        _mm512_storeu_ps(h, o0);
+        _mm512_storeu_ps(h.add(16), o1);
+        _mm512_storeu_ps(h.add(32), o2);
+        _mm512_storeu_ps(h.add(48), o3);
     }
 }
 
