@@ -51,7 +51,9 @@
 //!   rays; AVX-512 intrinsics in `bvh4_packet_avx512.rs` at that level), the
 //!   hits on Lambertian triangles are shaded together in structure of arrays
 //!   (`shade_packet.rs`: hit points, frames, triangle-light samples, MIS,
-//!   cosine BSDF samples across the 16 lanes) and any other hit lane by lane
+//!   cosine BSDF samples across the 16 lanes; at AVX-512 each lane's hit
+//!   geometry, ray and Sobol draws fetched by gathers, `hit_lanes_avx512.rs`
+//!   and `sampler::bounce_draws_sobol_lanes`) and any other hit lane by lane
 //!   (`integrator::scatter`), then their shadow rays are sorted and cast the
 //!   same way;
 //!   a lane whose path ends takes the next sample of the run's stream, of
