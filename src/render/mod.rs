@@ -95,6 +95,7 @@ pub mod bvh4_packet;
 mod bvh4_packet_avx512;
 pub mod film;
 pub mod geometry;
+#[cfg(target_arch = "x86_64")]
 mod hit_lanes_avx512;
 pub mod integrator;
 mod lanes;

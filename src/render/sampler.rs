@@ -299,6 +299,7 @@ impl Sampler {
 
 /// The bounce draws of one packet's lanes (`shade_packet::shade_diffuse`'s
 /// arrays): light point, BSDF direction, Russian roulette.
+#[cfg(target_arch = "x86_64")]
 pub(super) struct LaneDraws<'a> {
     pub light: [&'a mut [f32; 16]; 2],
     pub dir: [&'a mut [f32; 16]; 2],

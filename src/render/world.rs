@@ -580,6 +580,7 @@ impl World {
 
     /// The triangle normals as floats, three per primitive (x, y, z), for
     /// the AVX-512 kernel's gathers (`hit_lanes_avx512`).
+    #[cfg(target_arch = "x86_64")]
     pub(super) fn tri_ng_ptr(&self) -> *const f32 {
         self.tri_ng.as_ptr().cast()
     }
