@@ -21,6 +21,7 @@
 use super::geometry::{PrimHit, Shape};
 use super::path::PathState;
 use super::ray_packet::{LANES, LaneMask, PacketHits, RayPacket};
+use super::simd::{lane_numbers, record_offsets};
 use super::world::{PrimInfo, World};
 use glam::Vec3;
 use std::mem::{offset_of, size_of};
@@ -92,7 +93,7 @@ pub(super) unsafe fn hit_lanes(
 ) -> HitMasks {
     use std::arch::x86_64::*;
     let m = todo as __mmask16;
-    let lane = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    let lane = lane_numbers();
     // SAFETY (every gather below): the masked lanes are those of `todo`,
     // whose primitive indices lie inside `world`'s tables (caller), and lane
     // indices below 16 inside `st` and `hits`; each base pointer is derived
@@ -100,12 +101,7 @@ pub(super) unsafe fn hit_lanes(
     // 16 floats into 16-float arrays.
     unsafe {
         let prim = _mm512_maskz_loadu_epi32(m, hits.prim.as_ptr().cast());
-        let at = |scale: usize, first: usize| {
-            _mm512_add_epi32(
-                _mm512_mullo_epi32(prim, _mm512_set1_epi32(scale as i32)),
-                _mm512_set1_epi32(first as i32),
-            )
-        };
+        let at = |stride: usize, first: usize| record_offsets(prim, stride, first);
         // Float `idx[k]` past `base`, lanes of `m`; `dst`'s own value elsewhere.
         macro_rules! gather_into {
             ($dst:expr, $idx:expr, $base:expr) => {{
@@ -135,12 +131,7 @@ pub(super) unsafe fn hit_lanes(
             .cast::<u8>()
             .add(offset_of!(PrimHit, b))
             .cast::<f32>();
-        let by_lane = |scale: usize, first: usize| {
-            _mm512_add_epi32(
-                _mm512_mullo_epi32(lane, _mm512_set1_epi32(scale as i32)),
-                _mm512_set1_epi32(first as i32),
-            )
-        };
+        let by_lane = |stride: usize, first: usize| record_offsets(lane, stride, first);
         for (k, d) in bary.iter_mut().enumerate() {
             gather_into!(d, by_lane(HIT_FLOATS, k), h);
         }
@@ -196,15 +187,11 @@ pub(super) unsafe fn packet_rays(st: &[PathState; LANES], alive: LaneMask, rays:
     // SAFETY: lane indices below 16 address `st`'s 16 states from its own
     // pointer; loads and stores are of 16-float arrays.
     unsafe {
-        let lane = _mm512_mullo_epi32(
-            _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15),
-            _mm512_set1_epi32(STATE_FLOATS as i32),
-        );
         let sp = st.as_ptr().cast::<u8>();
         let o = sp.add(offset_of!(PathState, o)).cast::<f32>();
         let d = sp.add(offset_of!(PathState, d)).cast::<f32>();
         for a in 0..3 {
-            let idx = _mm512_add_epi32(lane, _mm512_set1_epi32(a as i32));
+            let idx = record_offsets(lane_numbers(), STATE_FLOATS, a);
             let go = _mm512_mask_i32gather_ps::<4>(_mm512_loadu_ps(rays.o[a].as_ptr()), m, idx, o);
             _mm512_storeu_ps(rays.o[a].as_mut_ptr(), go);
             let gd = _mm512_mask_i32gather_ps::<4>(_mm512_loadu_ps(rays.d[a].as_ptr()), m, idx, d);

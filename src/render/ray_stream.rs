@@ -154,7 +154,7 @@ fn sort_avx512(rs: &mut RayStream, scs: &[PacketScratch], cast: Cast) {
     // every packet); each place is below the rays' total, `order`'s length.
     unsafe {
         let one = _mm512_set1_epi32(1);
-        let lane_ids = _mm512_set_epi32(15, 14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0);
+        let lane_ids = super::simd::lane_numbers();
         for p in 0..n {
             let m = cast.of(&scs[p]).active as __mmask16;
             let k =

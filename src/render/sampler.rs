@@ -338,10 +338,7 @@ pub(super) unsafe fn bounce_draws_sobol_lanes(
     // `y[d..d + 4]` with d ≤ LANES − 4, as `bounce_draws_sobol` bounds it.
     // The stores write 16-float arrays under the lanes' mask.
     unsafe {
-        let lane = _mm512_mullo_epi32(
-            _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15),
-            _mm512_set1_epi32(SAMPLER_FLOATS as i32),
-        );
+        let lane = super::simd::record_offsets(super::simd::lane_numbers(), SAMPLER_FLOATS, 0);
         let base = smps.as_mut_ptr().cast::<u8>();
         let word = |off: usize| base.add(off).cast::<i32>();
         let g = go as __mmask16;

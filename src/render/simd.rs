@@ -100,3 +100,31 @@ impl RenderIsa {
         }
     }
 }
+
+/// The sixteen lanes' own numbers, 0 to 15, for the AVX-512 kernels.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+#[inline]
+pub(super) fn lane_numbers() -> std::arch::x86_64::__m512i {
+    use std::arch::x86_64::*;
+    _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15)
+}
+
+/// For the AVX-512 kernels' gathers from an array of records `stride`
+/// 4-byte words long: in each lane k, the offset in words of word `first`
+/// of record `index[k]` (`index[k]·stride + first`; the caller keeps it in
+/// `i32`).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+#[inline]
+pub(super) fn record_offsets(
+    index: std::arch::x86_64::__m512i,
+    stride: usize,
+    first: usize,
+) -> std::arch::x86_64::__m512i {
+    use std::arch::x86_64::*;
+    _mm512_add_epi32(
+        _mm512_mullo_epi32(index, _mm512_set1_epi32(stride as i32)),
+        _mm512_set1_epi32(first as i32),
+    )
+}
