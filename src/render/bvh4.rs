@@ -74,9 +74,11 @@ pub(super) struct TriPacket {
     pub(super) prim: [u32; 4],
     /// Lanes `0..n` hold triangles.
     pub(super) n: u32,
-    /// The same vertices one triangle at a time, `xyz[lane][vertex]` =
-    /// (x, y, z, 0): what the AVX-512 packet kernel loads and permutes per ray.
-    pub(super) xyz: [[[f32; 4]; 3]; 4],
+    /// The same vertices as points, `xyz[vertex][lane]` = (x, y, z, 0): what
+    /// the AVX-512 packet kernel permutes into its lanes — one triangle's
+    /// vertex broadcast to every ray, or one vertex of all four triangles
+    /// (one 64-byte row) spread over up to four rays.
+    pub(super) xyz: [[[f32; 4]; 4]; 3],
 }
 
 pub struct Bvh4 {
@@ -262,12 +264,38 @@ impl Bvh4 {
     fn leaf(&mut self, b2: &Bvh2, n: usize, shapes: &[Shape]) -> u32 {
         let node = &b2.nodes[n];
         let first = node.first_index as usize;
-        let prims = &b2.primitive_indices[first..first + node.prim_count as usize];
+        self.leaf_of(
+            &b2.primitive_indices[first..first + node.prim_count as usize],
+            shapes,
+        )
+    }
+
+    /// A tree that is one leaf holding every shape (at most four
+    /// triangles are packed; the rest go to the scalar tests): the SAH
+    /// builder rarely packs more than two triangles in a leaf, so the
+    /// traversal tests build this one to reach a full leaf.
+    #[cfg(test)]
+    pub(super) fn one_leaf(shapes: &[Shape]) -> Bvh4 {
+        let mut out = Bvh4 {
+            nodes: Vec::new(),
+            leaves: Vec::new(),
+            packets: Vec::new(),
+            others: Vec::new(),
+            root: EMPTY,
+        };
+        let prims: Vec<u32> = (0..shapes.len() as u32).collect();
+        out.root = out.leaf_of(&prims, shapes);
+        out
+    }
+
+    /// A leaf of `prims`: its first four triangles as a packet, the rest in
+    /// `others`.
+    fn leaf_of(&mut self, prims: &[u32], shapes: &[Shape]) -> u32 {
         let mut packet = TriPacket {
             v: [[f32x4::ZERO; 3]; 3],
             prim: [EMPTY; 4],
             n: 0,
-            xyz: [[[0.0; 4]; 3]; 4],
+            xyz: [[[0.0; 4]; 4]; 3],
         };
         let mut v = [[[0.0f32; 4]; 3]; 3];
         let others = self.others.len() as u32;
@@ -279,7 +307,7 @@ impl Bvh4 {
                         for a in 0..3 {
                             v[vi][a][l] = pv[a];
                         }
-                        packet.xyz[l][vi] = [pv.x, pv.y, pv.z, 0.0];
+                        packet.xyz[vi][l] = [pv.x, pv.y, pv.z, 0.0];
                     }
                     packet.prim[l] = prim;
                     packet.n += 1;

@@ -671,6 +671,71 @@ mod tests {
         }
     }
 
+    /// One leaf of four triangles met by packets of one to sixteen rays in
+    /// scattered lanes, their far ends before, between or beyond the
+    /// triangles: the AVX-512 kernel tests up to four rays against a leaf's
+    /// triangles at once (`bvh4_packet_avx512::Spread`), and each
+    /// triangle's place in that test must give the single-ray answers,
+    /// closest hits and shadow rays. The four triangles halve one square
+    /// two ways, each tilted at random, so that each is somewhere the
+    /// nearest and the only one before a ray's far end; the tree is one
+    /// leaf of two, three or four of them (`Bvh4::one_leaf`).
+    #[test]
+    fn packet_agrees_with_single_ray_on_one_leaf() {
+        let corners = [
+            [(0.0, 0.0), (2.0, 0.0), (0.0, 2.0)],
+            [(2.0, 0.0), (2.0, 2.0), (0.0, 2.0)],
+            [(0.0, 0.0), (2.0, 0.0), (2.0, 2.0)],
+            [(0.0, 0.0), (2.0, 2.0), (0.0, 2.0)],
+        ];
+        let mut rng = Rng::for_sample(21, 0, 0);
+        let mut counts = [0; 3];
+        for trial in 0..48 {
+            // Each triangle's corners at depths 1.0, 1.15 and 1.3 in a random
+            // order; two, three or four triangles.
+            let n = 2 + trial % 3;
+            let shapes: Vec<Shape> = corners[..n]
+                .iter()
+                .map(|c| {
+                    let mut z = [1.0f32, 1.15, 1.3];
+                    for k in (1..3).rev() {
+                        z.swap(k, ((rng.uniform() * (k + 1) as f32) as usize).min(k));
+                    }
+                    Shape::Triangle {
+                        p: [0, 1, 2].map(|v| Vec3::new(c[v].0, c[v].1, z[v])),
+                    }
+                })
+                .collect();
+            let bvh = Bvh4::one_leaf(&shapes);
+            for i in 0..100 {
+                let mut rays = RayPacket {
+                    o: [[f32::NAN; LANES]; 3],
+                    d: [[f32::NAN; LANES]; 3],
+                    tmax: [f32::NAN; LANES],
+                    active: 0,
+                };
+                let want = 1 + (i % LANES) as u32;
+                while rays.active.count_ones() < want {
+                    let l = ((rng.uniform() * LANES as f32) as usize).min(LANES - 1);
+                    let o = Vec3::new(2.2 * rng.uniform() - 0.1, 2.2 * rng.uniform() - 0.1, 0.0);
+                    let d = Vec3::new(
+                        0.02 * rng.uniform() - 0.01,
+                        0.02 * rng.uniform() - 0.01,
+                        1.0,
+                    );
+                    rays.set(l, o, d, 0.95 + 0.4 * rng.uniform());
+                }
+                let c = check(&bvh, &shapes, &rays);
+                for k in 0..3 {
+                    counts[k] += c[k];
+                }
+            }
+        }
+        let [hits, n, ties] = counts;
+        assert!(hits > n / 4 && n - hits > n / 4, "{hits} of {n}");
+        assert_eq!(ties, 0);
+    }
+
     #[test]
     fn packet_agrees_with_single_ray_in_cornell_box() {
         let world = cornell();

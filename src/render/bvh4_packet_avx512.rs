@@ -27,6 +27,10 @@ use super::ray_packet::{ALL_LANES, LANES, LaneMask, PacketHits, RayPacket};
 use std::arch::x86_64::*;
 use std::mem::MaybeUninit;
 
+/// A leaf with at least this many triangles is tested by a `Spread` when at
+/// most four of the packet's rays reach it.
+const SPREAD_MIN_TRIS: u32 = 2;
+
 /// The exact-zero edge fallback of the watertight test, in f64.
 #[inline(never)]
 fn edge_f64(ax: f32, ay: f32, bx: f32, by: f32) -> f32 {
@@ -37,10 +41,21 @@ fn edge_f64(ax: f32, ay: f32, bx: f32, by: f32) -> f32 {
 struct Pre {
     o: [__m512; 3],
     inv: [__m512; 3],
+    /// The triangle test's constants, lane `l` for ray `l`.
+    tri: TriRays,
+}
+
+/// The watertight triangle test's ray constants in sixteen lanes: the
+/// permuted origin `op`, the shear `s`, and per lane the position `k` in
+/// the vertex registers of its kx, ky, kz components (`TriRays::triangle`).
+/// Either each lane is a ray of the packet testing one triangle (`Pre`:
+/// `k` is 0, 1 or 2 and the caller broadcasts the triangle's vertices), or
+/// up to four rays are spread over a leaf's four triangles (`Spread`: lane
+/// 4r + t holds ray slot r, and `k` points into triangle t's 128-bit block
+/// of a vertex row `TriPacket::xyz[i]`).
+struct TriRays {
     op: [__m512; 3],
     s: [__m512; 3],
-    /// Per lane, the index (0 = x, 1 = y, 2 = z) of the triangle test's
-    /// axes kx, ky, kz, for `_mm512_permutexvar_ps`.
     k: [__m512i; 3],
 }
 
@@ -130,12 +145,14 @@ impl Pre {
             Pre {
                 o: [ld(o[0]), ld(o[1]), ld(o[2])],
                 inv: [ld(inv[0]), ld(inv[1]), ld(inv[2])],
-                op: [ld(op[0]), ld(op[1]), ld(op[2])],
-                s: [ld(s[0]), ld(s[1]), ld(s[2])],
-                k: axes(
-                    _mm512_movepi32_mask(_mm512_loadu_si512(kz0.as_ptr().cast())),
-                    _mm512_movepi32_mask(_mm512_loadu_si512(kz1.as_ptr().cast())),
-                ),
+                tri: TriRays {
+                    op: [ld(op[0]), ld(op[1]), ld(op[2])],
+                    s: [ld(s[0]), ld(s[1]), ld(s[2])],
+                    k: axes(
+                        _mm512_movepi32_mask(_mm512_loadu_si512(kz0.as_ptr().cast())),
+                        _mm512_movepi32_mask(_mm512_loadu_si512(kz1.as_ptr().cast())),
+                    ),
+                },
             }
         }
     }
@@ -159,8 +176,12 @@ impl Pre {
             (le(tn, tf), tn)
         }
     }
+}
 
-    /// `PacketPre::triangle`: triangle `j` of `p` against the lanes of `m`.
+impl TriRays {
+    /// `PacketPre::triangle` against the lanes of `m`: each lane's triangle
+    /// has vertex `i` in `v[i]` where the lane's `k` finds its components
+    /// (see `TriRays`).
     ///
     /// Always inlined into its two callers, `intersect_packet` and
     /// `unoccluded_packet`, which enable the AVX-512 features it needs (rustc
@@ -174,8 +195,7 @@ impl Pre {
     #[inline(always)]
     unsafe fn triangle(
         &self,
-        p: &TriPacket,
-        j: usize,
+        v: &[__m512; 3],
         tmax: __m512,
         m: __mmask16,
         h: &mut TriHits,
@@ -186,12 +206,9 @@ impl Pre {
             let mut py = [zero; 3];
             let mut pz = [zero; 3];
             for i in 0..3 {
-                // The vertex as (x, y, z, ·) in every 128-bit block; each
-                // lane picks its permuted components from the first one.
-                let v = _mm512_broadcast_f32x4(_mm_loadu_ps(p.xyz[j][i].as_ptr()));
-                let vx = _mm512_permutexvar_ps(self.k[0], v);
-                let vy = _mm512_permutexvar_ps(self.k[1], v);
-                let vz = _mm512_permutexvar_ps(self.k[2], v);
+                let vx = _mm512_permutexvar_ps(self.k[0], v[i]);
+                let vy = _mm512_permutexvar_ps(self.k[1], v[i]);
+                let vz = _mm512_permutexvar_ps(self.k[2], v[i]);
                 pz[i] = _mm512_sub_ps(vz, self.op[2]);
                 px[i] = _mm512_add_ps(
                     _mm512_sub_ps(vx, self.op[0]),
@@ -289,6 +306,81 @@ impl Pre {
     }
 }
 
+/// Triangle `j` of `p`'s vertices, each as (x, y, z, ·) in every 128-bit
+/// block: what `TriRays::triangle` takes with a packet's own `TriRays`.
+#[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512dq")]
+#[inline]
+unsafe fn broadcast_vertices(p: &TriPacket, j: usize) -> [__m512; 3] {
+    // SAFETY: 16-byte loads of `p.xyz[i][j]` (AVX-512F, enabled here).
+    unsafe { [0, 1, 2].map(|i| _mm512_broadcast_f32x4(_mm_loadu_ps(p.xyz[i][j].as_ptr()))) }
+}
+
+/// Up to four rays of a packet spread over a leaf's four triangles, so that
+/// one sixteen-lane triangle test does the work of four: lane 4r + t tests
+/// the r-th ray of the mask (its slot) against triangle t. The packet
+/// traversal reaches a leaf with four of its sixteen lanes active on average
+/// (docs/performance.md, *Twenty-fourth pass*), so a test per triangle left
+/// most of each test idle. (Five to eight rays spread as 8 × 2 in two tests
+/// measured slower than a test per triangle: *Twenty-seventh pass*.)
+struct Spread {
+    rays: TriRays,
+    /// Per lane its ray's `tmax`.
+    tmax: __m512,
+    /// In each ray lane of the mask, 4 × its slot (0 elsewhere): the lane
+    /// of the test holding that ray against triangle 0.
+    slot4: __m512i,
+    /// The lanes holding a ray and one of the leaf's triangles.
+    m: __mmask16,
+}
+
+impl Spread {
+    /// The rays of `mask` (at most four) with their `tmax`, against a leaf
+    /// of `n` triangles.
+    #[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512dq")]
+    #[inline]
+    unsafe fn new(r: &TriRays, mask: __mmask16, n: u32, tmax: __m512) -> Self {
+        debug_assert!(mask.count_ones() <= 4 && n <= 4);
+        let lane = super::simd::lane_numbers();
+        // The ray lane of each slot, then of each lane of the test (lane / 4).
+        let ray_of_slot = _mm512_maskz_compress_epi32(mask, lane);
+        let ray = _mm512_permutexvar_epi32(_mm512_srli_epi32::<2>(lane), ray_of_slot);
+        // Triangle t's block in a vertex row: 4t, t = lane mod 4.
+        let block = _mm512_slli_epi32::<2>(_mm512_and_si512(lane, _mm512_set1_epi32(3)));
+        let spread = |v: __m512| _mm512_permutexvar_ps(ray, v);
+        let kz = |k: __m512i| _mm512_add_epi32(_mm512_permutexvar_epi32(ray, k), block);
+        let slots = (1u32 << (4 * mask.count_ones())) - 1;
+        let tris = 0x1111u32 * ((1u32 << n) - 1);
+        Spread {
+            rays: TriRays {
+                op: r.op.map(spread),
+                s: r.s.map(spread),
+                k: r.k.map(kz),
+            },
+            tmax: spread(tmax),
+            slot4: _mm512_maskz_expand_epi32(mask, _mm512_slli_epi32::<2>(lane)),
+            m: (slots & tris) as __mmask16,
+        }
+    }
+
+    /// The ray lanes of `mask` whose lanes for triangle `t` are set in
+    /// `hits`.
+    #[target_feature(enable = "bmi2")]
+    #[inline]
+    unsafe fn ray_lanes(hits: __mmask16, t: usize, mask: __mmask16) -> __mmask16 {
+        _pdep_u32(_pext_u32(hits as u32, 0x1111 << t), mask as u32) as __mmask16
+    }
+}
+
+/// A leaf's four triangles' vertices, row `i` holding vertex `i` of
+/// triangle t in 128-bit block t: what `TriRays::triangle` takes with a
+/// `Spread`'s `TriRays`.
+#[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512dq")]
+#[inline]
+unsafe fn vertex_rows(p: &TriPacket) -> [__m512; 3] {
+    // SAFETY: 64-byte loads of `p.xyz[i]` (AVX-512F, enabled here).
+    unsafe { [0, 1, 2].map(|i| _mm512_loadu_ps(p.xyz[i].as_ptr().cast())) }
+}
+
 /// `Bvh4::intersect_packet` with AVX-512 intrinsics.
 ///
 /// # Safety
@@ -330,23 +422,56 @@ pub(super) unsafe fn intersect_packet(
                     // Every triangle of the leaf is tested with the closest t
                     // at leaf entry as tmax, as the single-ray 4-triangle test.
                     let tmax = best_t;
-                    for j in 0..p.n as usize {
-                        let hit = r.triangle(p, j, tmax, mask, &mut h);
-                        let closer = hit & lt(h.t, best_t);
-                        if closer != 0 {
-                            best_t = _mm512_mask_mov_ps(best_t, closer, h.t);
-                            for k in 0..3 {
-                                best_b[k] = _mm512_mask_mov_ps(
-                                    best_b[k],
+                    if mask.count_ones() <= 4 && p.n >= SPREAD_MIN_TRIS {
+                        // Up to four rays against all the leaf's triangles in
+                        // one test; then the triangles' hits in order, as below.
+                        let sp = Spread::new(&r.tri, mask, p.n, tmax);
+                        let hit = sp.rays.triangle(&vertex_rows(p), sp.tmax, sp.m, &mut h);
+                        if hit != 0 {
+                            let b = h.e.map(|e| _mm512_mul_ps(e, h.inv_det));
+                            for j in 0..p.n as usize {
+                                let lanes = Spread::ray_lanes(hit, j, mask);
+                                if lanes == 0 {
+                                    continue;
+                                }
+                                let at = _mm512_add_epi32(sp.slot4, _mm512_set1_epi32(j as i32));
+                                let t = _mm512_permutexvar_ps(at, h.t);
+                                let closer = lanes & lt(t, best_t);
+                                if closer != 0 {
+                                    best_t = _mm512_mask_mov_ps(best_t, closer, t);
+                                    for k in 0..3 {
+                                        best_b[k] =
+                                            _mm512_mask_permutexvar_ps(best_b[k], closer, at, b[k]);
+                                    }
+                                    best_prim = _mm512_mask_mov_epi32(
+                                        best_prim,
+                                        closer,
+                                        _mm512_set1_epi32(p.prim[j] as i32),
+                                    );
+                                }
+                            }
+                        }
+                    } else {
+                        for j in 0..p.n as usize {
+                            let hit = r
+                                .tri
+                                .triangle(&broadcast_vertices(p, j), tmax, mask, &mut h);
+                            let closer = hit & lt(h.t, best_t);
+                            if closer != 0 {
+                                best_t = _mm512_mask_mov_ps(best_t, closer, h.t);
+                                for k in 0..3 {
+                                    best_b[k] = _mm512_mask_mov_ps(
+                                        best_b[k],
+                                        closer,
+                                        _mm512_mul_ps(h.e[k], h.inv_det),
+                                    );
+                                }
+                                best_prim = _mm512_mask_mov_epi32(
+                                    best_prim,
                                     closer,
-                                    _mm512_mul_ps(h.e[k], h.inv_det),
+                                    _mm512_set1_epi32(p.prim[j] as i32),
                                 );
                             }
-                            best_prim = _mm512_mask_mov_epi32(
-                                best_prim,
-                                closer,
-                                _mm512_set1_epi32(p.prim[j] as i32),
-                            );
                         }
                     }
                 }
@@ -519,12 +644,25 @@ pub(super) unsafe fn unoccluded_packet(bvh: &Bvh4, shapes: &[Shape], rays: &RayP
                 let leaf = &bvh.leaves[(code & !LEAF) as usize];
                 if leaf.packet != EMPTY {
                     let p = &bvh.packets[leaf.packet as usize];
-                    for j in 0..p.n as usize {
-                        let hit = r.triangle(p, j, tmax, mask, &mut h);
-                        free &= !hit;
-                        mask &= !hit;
-                        if mask == 0 {
-                            break;
+                    if mask.count_ones() <= 4 && p.n >= SPREAD_MIN_TRIS {
+                        // Up to four rays against all the leaf's triangles in
+                        // one test: a ray is blocked if any of its lanes hit.
+                        let sp = Spread::new(&r.tri, mask, p.n, tmax);
+                        let hit = sp.rays.triangle(&vertex_rows(p), sp.tmax, sp.m, &mut h);
+                        let any = hit | (hit >> 1) | (hit >> 2) | (hit >> 3);
+                        let blocked = Spread::ray_lanes(any, 0, mask);
+                        free &= !blocked;
+                        mask &= !blocked;
+                    } else {
+                        for j in 0..p.n as usize {
+                            let hit = r
+                                .tri
+                                .triangle(&broadcast_vertices(p, j), tmax, mask, &mut h);
+                            free &= !hit;
+                            mask &= !hit;
+                            if mask == 0 {
+                                break;
+                            }
                         }
                     }
                 }
