@@ -40,6 +40,24 @@ fn camera_ray(
     world_ray(to_world, camera.sample_ray(film_m, u, lambda_nm))
 }
 
+/// `d` scaled to unit length, or zero (`DVec3::normalize_or_zero`), but
+/// left as it is when its squared length is already 1 within a few f64
+/// rounding errors: what a unit camera direction (the pinhole's, the thin
+/// lens's) turned by a rigid camera-to-world matrix gives. Its length then
+/// differs from 1 by about 1e-16, a billionth of the f32 rounding the path
+/// tracer's ray gets next, and the square root and division per camera
+/// ray are saved (they were ≈ 3 % of the bench's render: docs/performance.md,
+/// *Twenty-seventh pass*).
+#[inline(always)]
+fn unit(d: DVec3) -> DVec3 {
+    let l2 = d.length_squared();
+    if (l2 - 1.0).abs() <= 8.0 * f64::EPSILON {
+        d
+    } else {
+        d.normalize_or_zero()
+    }
+}
+
 /// The world-space ray of camera ray `r` (None: vignetted, or a weight or
 /// ray the film cannot use).
 #[inline(always)]
@@ -49,7 +67,7 @@ fn world_ray(to_world: &DMat4, r: Option<CameraRay>) -> Option<(Vec3, Vec3, f64)
         return None;
     }
     let o = to_world.transform_point3(r.origin);
-    let d = to_world.transform_vector3(r.direction).normalize_or_zero();
+    let d = unit(to_world.transform_vector3(r.direction));
     if d == DVec3::ZERO || !o.is_finite() {
         return None;
     }
@@ -977,6 +995,55 @@ mod tests {
     use crate::optics::pinhole::Pinhole;
     use crate::render::BvhKind;
     use crate::render::bench::mitsuba_cornell_box;
+
+    /// `unit` against normalising: a unit direction turned by a rigid
+    /// camera-to-world matrix is kept as it is, and its f32 ray (what the
+    /// path tracer gets) is the normalised direction's within one f32 ulp
+    /// per component; anything else (scaled, sheared, zero, NaN) is
+    /// normalised exactly as `normalize_or_zero` does.
+    #[test]
+    fn camera_directions_already_unit_are_kept() {
+        let mut rng = crate::render::sampling::Rng::for_sample(5, 0, 0);
+        let (mut kept, mut same_bits) = (0usize, 0usize);
+        let n = 20_000;
+        for _ in 0..n {
+            let mut g = || rng.uniform() as f64 * 2.0 - 1.0;
+            let axis = DVec3::new(g(), g(), g()).normalize();
+            let m = DMat4::from_translation(DVec3::new(g(), g(), g()))
+                * DMat4::from_axis_angle(axis, 3.0 * g());
+            let d = DVec3::new(0.3 * g(), 0.3 * g(), 1.0).normalize();
+            let w = m.transform_vector3(d);
+            let u = unit(w);
+            let want = w.normalize_or_zero();
+            if u == w {
+                kept += 1;
+            }
+            let (a, b) = (u.as_vec3(), want.as_vec3());
+            for k in 0..3 {
+                let ulps = (a[k].to_bits() as i64 - b[k].to_bits() as i64).abs();
+                assert!(ulps <= 1, "{w}: {a} against {b}");
+            }
+            same_bits += usize::from(a == b);
+            // Not unit: normalised as before, bit for bit.
+            for s in [2.0, 0.5, 1.0 + 1e-12, 1.0 - 1e-12] {
+                let v = w * s;
+                assert_eq!(unit(v), v.normalize_or_zero(), "{v}");
+            }
+            let shear = DMat4::from_cols_array(&[
+                1.0, 0.0, 0.0, 0.0, 0.3, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0,
+            ]);
+            let v = (shear * m).transform_vector3(d);
+            assert_eq!(unit(v), v.normalize_or_zero());
+        }
+        assert!(kept > n * 9 / 10, "{kept} of {n} kept");
+        assert!(
+            same_bits > n * 99 / 100,
+            "{same_bits} of {n} with the same f32 bits"
+        );
+        assert_eq!(unit(DVec3::ZERO), DVec3::ZERO);
+        assert_eq!(unit(DVec3::new(f64::NAN, 0.0, 1.0)), DVec3::ZERO);
+        assert_eq!(unit(DVec3::new(f64::INFINITY, 0.0, 1.0)), DVec3::ZERO);
+    }
 
     /// Every instruction set level this machine has, with paths traced one by
     /// one or 16 at a time, renders the same image bit for bit (irradiance,
