@@ -48,7 +48,9 @@
 //!   paths' rays of all the run's packets are sorted by direction octant and
 //!   origin cell and cast 16 at a time in that order (`ray_stream.rs`), each
 //!   `RayPacket` through the packet traversal (`bvh4_packet.rs`, SIMD across
-//!   rays; AVX-512 intrinsics in `bvh4_packet_avx512.rs` at that level), the
+//!   rays; AVX-512 intrinsics in `bvh4_packet_avx512.rs` at that level,
+//!   where up to four rays reaching a leaf are tested against its triangles
+//!   in one sixteen-lane test, `Spread`), the
 //!   hits on Lambertian triangles are shaded together in structure of arrays
 //!   (`shade_packet.rs`: hit points, frames, triangle-light samples, MIS,
 //!   cosine BSDF samples across the 16 lanes; at AVX-512 each lane's hit
