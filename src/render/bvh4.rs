@@ -248,17 +248,22 @@ impl Bvh4 {
         if b2.nodes.is_empty() {
             return None;
         }
-        let mut out = Bvh4 {
+        let mut out = Bvh4::empty();
+        let mut depth = 0;
+        out.root = out.collapse(&b2, 0, shapes, 1, &mut depth);
+        // A 4-wide traversal leaves at most 3 entries on the stack per level.
+        (3 * depth + 4 <= STACK).then_some(out)
+    }
+
+    /// No nodes, leaves or primitives yet.
+    fn empty() -> Bvh4 {
+        Bvh4 {
             nodes: Vec::new(),
             leaves: Vec::new(),
             packets: Vec::new(),
             others: Vec::new(),
             root: EMPTY,
-        };
-        let mut depth = 0;
-        out.root = out.collapse(&b2, 0, shapes, 1, &mut depth);
-        // A 4-wide traversal leaves at most 3 entries on the stack per level.
-        (3 * depth + 4 <= STACK).then_some(out)
+        }
     }
 
     fn leaf(&mut self, b2: &Bvh2, n: usize, shapes: &[Shape]) -> u32 {
@@ -276,13 +281,7 @@ impl Bvh4 {
     /// traversal tests build this one to reach a full leaf.
     #[cfg(test)]
     pub(super) fn one_leaf(shapes: &[Shape]) -> Bvh4 {
-        let mut out = Bvh4 {
-            nodes: Vec::new(),
-            leaves: Vec::new(),
-            packets: Vec::new(),
-            others: Vec::new(),
-            root: EMPTY,
-        };
+        let mut out = Bvh4::empty();
         let prims: Vec<u32> = (0..shapes.len() as u32).collect();
         out.root = out.leaf_of(&prims, shapes);
         out
