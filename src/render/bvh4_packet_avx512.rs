@@ -381,6 +381,33 @@ unsafe fn vertex_rows(p: &TriPacket) -> [__m512; 3] {
     unsafe { [0, 1, 2].map(|i| _mm512_loadu_ps(p.xyz[i].as_ptr().cast())) }
 }
 
+/// A packet's closest hits so far: per lane t, barycentrics, primitive.
+struct Closest {
+    t: __m512,
+    b: [__m512; 3],
+    prim: __m512i,
+}
+
+impl Closest {
+    /// The lanes of `closer` take the hit at `t` with barycentrics `b` on
+    /// primitive `prim` (every lane's values given; the others keep theirs).
+    ///
+    /// # Safety
+    /// Only from a function with AVX-512 F enabled (inlined, as
+    /// `TriRays::triangle`).
+    #[inline(always)]
+    unsafe fn keep(&mut self, closer: __mmask16, t: __m512, b: [__m512; 3], prim: u32) {
+        // SAFETY: AVX-512F, enabled in the caller.
+        unsafe {
+            self.t = _mm512_mask_mov_ps(self.t, closer, t);
+            for (bk, new) in self.b.iter_mut().zip(b) {
+                *bk = _mm512_mask_mov_ps(*bk, closer, new);
+            }
+            self.prim = _mm512_mask_mov_epi32(self.prim, closer, _mm512_set1_epi32(prim as i32));
+        }
+    }
+}
+
 /// `Bvh4::intersect_packet` with AVX-512 intrinsics.
 ///
 /// # Safety
@@ -401,9 +428,11 @@ pub(super) unsafe fn intersect_packet(
     // SAFETY: the caller guarantees the features.
     unsafe {
         let r = Pre::new(&pre);
-        let mut best_t = ld(&rays.tmax);
-        let mut best_b = [splat(0.0); 3];
-        let mut best_prim = _mm512_set1_epi32(EMPTY as i32);
+        let mut best = Closest {
+            t: ld(&rays.tmax),
+            b: [splat(0.0); 3],
+            prim: _mm512_set1_epi32(EMPTY as i32),
+        };
         let mut h = TriHits {
             t: splat(0.0),
             e: [splat(0.0); 3],
@@ -421,7 +450,7 @@ pub(super) unsafe fn intersect_packet(
                     let p = &bvh.packets[leaf.packet as usize];
                     // Every triangle of the leaf is tested with the closest t
                     // at leaf entry as tmax, as the single-ray 4-triangle test.
-                    let tmax = best_t;
+                    let tmax = best.t;
                     if mask.count_ones() <= 4 && p.n >= SPREAD_MIN_TRIS {
                         // Up to four rays against all the leaf's triangles in
                         // one test; then the triangles' hits in order, as below.
@@ -436,18 +465,10 @@ pub(super) unsafe fn intersect_packet(
                                 }
                                 let at = _mm512_add_epi32(sp.slot4, _mm512_set1_epi32(j as i32));
                                 let t = _mm512_permutexvar_ps(at, h.t);
-                                let closer = lanes & lt(t, best_t);
+                                let closer = lanes & lt(t, best.t);
                                 if closer != 0 {
-                                    best_t = _mm512_mask_mov_ps(best_t, closer, t);
-                                    for k in 0..3 {
-                                        best_b[k] =
-                                            _mm512_mask_permutexvar_ps(best_b[k], closer, at, b[k]);
-                                    }
-                                    best_prim = _mm512_mask_mov_epi32(
-                                        best_prim,
-                                        closer,
-                                        _mm512_set1_epi32(p.prim[j] as i32),
-                                    );
+                                    let bj = b.map(|bk| _mm512_permutexvar_ps(at, bk));
+                                    best.keep(closer, t, bj, p.prim[j]);
                                 }
                             }
                         }
@@ -456,21 +477,10 @@ pub(super) unsafe fn intersect_packet(
                             let hit = r
                                 .tri
                                 .triangle(&broadcast_vertices(p, j), tmax, mask, &mut h);
-                            let closer = hit & lt(h.t, best_t);
+                            let closer = hit & lt(h.t, best.t);
                             if closer != 0 {
-                                best_t = _mm512_mask_mov_ps(best_t, closer, h.t);
-                                for k in 0..3 {
-                                    best_b[k] = _mm512_mask_mov_ps(
-                                        best_b[k],
-                                        closer,
-                                        _mm512_mul_ps(h.e[k], h.inv_det),
-                                    );
-                                }
-                                best_prim = _mm512_mask_mov_epi32(
-                                    best_prim,
-                                    closer,
-                                    _mm512_set1_epi32(p.prim[j] as i32),
-                                );
+                                let b = h.e.map(|e| _mm512_mul_ps(e, h.inv_det));
+                                best.keep(closer, h.t, b, p.prim[j]);
                             }
                         }
                     }
@@ -478,10 +488,10 @@ pub(super) unsafe fn intersect_packet(
                 if leaf.n_others > 0 {
                     // Spheres and disks: the scalar tests, lane by lane.
                     let s = leaf.others as usize;
-                    let mut bt = st(best_t);
-                    let mut bb = [st(best_b[0]), st(best_b[1]), st(best_b[2])];
+                    let mut bt = st(best.t);
+                    let mut bb = [st(best.b[0]), st(best.b[1]), st(best.b[2])];
                     let mut bp = [0u32; LANES];
-                    _mm512_storeu_si512(bp.as_mut_ptr().cast(), best_prim);
+                    _mm512_storeu_si512(bp.as_mut_ptr().cast(), best.prim);
                     for &prim in &bvh.others[s..s + leaf.n_others as usize] {
                         for l in (0..LANES).filter(|l| mask & (1 << l) != 0) {
                             let (tri, d) = pre.tri_ray(l);
@@ -496,9 +506,9 @@ pub(super) unsafe fn intersect_packet(
                             }
                         }
                     }
-                    best_t = ld(&bt);
-                    best_b = [ld(&bb[0]), ld(&bb[1]), ld(&bb[2])];
-                    best_prim = _mm512_loadu_si512(bp.as_ptr().cast());
+                    best.t = ld(&bt);
+                    best.b = [ld(&bb[0]), ld(&bb[1]), ld(&bb[2])];
+                    best.prim = _mm512_loadu_si512(bp.as_ptr().cast());
                 }
             } else {
                 let node = &bvh.nodes[code as usize];
@@ -509,7 +519,7 @@ pub(super) unsafe fn intersect_packet(
                     if node.valid & (1 << c) == 0 {
                         continue;
                     }
-                    let (m, tn) = r.child_box(node, c, best_t);
+                    let (m, tn) = r.child_box(node, c, best.t);
                     let m = m & mask;
                     if m == 0 {
                         continue;
@@ -537,7 +547,7 @@ pub(super) unsafe fn intersect_packet(
                 sp -= 1;
                 // SAFETY: entries below `sp` were written before being counted.
                 let (c, tn) = stack[sp].assume_init();
-                let m = le(tn, best_t);
+                let m = le(tn, best.t);
                 if m != 0 {
                     code = c;
                     mask = m;
@@ -545,7 +555,7 @@ pub(super) unsafe fn intersect_packet(
                 }
             }
         }
-        write_hits(active, best_t, best_b, best_prim, out);
+        write_hits(active, best, out);
     }
 }
 
@@ -556,13 +566,8 @@ pub(super) unsafe fn intersect_packet(
 /// from the lanes' columns — instead of five scalar stores a lane.
 #[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512dq")]
 #[inline]
-unsafe fn write_hits(
-    active: LaneMask,
-    t: __m512,
-    b: [__m512; 3],
-    prim: __m512i,
-    out: &mut PacketHits,
-) {
+unsafe fn write_hits(active: LaneMask, best: Closest, out: &mut PacketHits) {
+    let Closest { t, b, prim } = best;
     const _: () = assert!(
         std::mem::offset_of!(PrimHit, t) == 0
             && std::mem::offset_of!(PrimHit, b) == 4

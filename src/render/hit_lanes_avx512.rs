@@ -102,14 +102,6 @@ pub(super) unsafe fn hit_lanes(
     unsafe {
         let prim = _mm512_maskz_loadu_epi32(m, hits.prim.as_ptr().cast());
         let at = |stride: usize, first: usize| record_offsets(prim, stride, first);
-        // Float `idx[k]` past `base`, lanes of `m`; `dst`'s own value elsewhere.
-        macro_rules! gather_into {
-            ($dst:expr, $idx:expr, $base:expr) => {{
-                let d: &mut [f32; LANES] = $dst;
-                let g = _mm512_mask_i32gather_ps::<4>(_mm512_loadu_ps(d.as_ptr()), m, $idx, $base);
-                _mm512_storeu_ps(d.as_mut_ptr(), g);
-            }};
-        }
         let shapes = world
             .accel
             .shapes
@@ -119,11 +111,11 @@ pub(super) unsafe fn hit_lanes(
             .cast::<f32>();
         let HitLanes { v, bary, ng, dir } = out;
         for (j, d) in v.into_iter().enumerate() {
-            gather_into!(d, at(SHAPE_FLOATS, j), shapes);
+            gather_into(d, m, at(SHAPE_FLOATS, j), shapes);
         }
         let tri_ng = world.tri_ng_ptr();
         for (a, d) in ng.into_iter().enumerate() {
-            gather_into!(d, at(3, a), tri_ng);
+            gather_into(d, m, at(3, a), tri_ng);
         }
         let h = hits
             .h
@@ -133,12 +125,12 @@ pub(super) unsafe fn hit_lanes(
             .cast::<f32>();
         let by_lane = |stride: usize, first: usize| record_offsets(lane, stride, first);
         for (k, d) in bary.iter_mut().enumerate() {
-            gather_into!(d, by_lane(HIT_FLOATS, k), h);
+            gather_into(d, m, by_lane(HIT_FLOATS, k), h);
         }
         let sp = st.as_ptr().cast::<u8>();
         let d_at = sp.add(offset_of!(PathState, d)).cast::<f32>();
         for (a, d) in dir.into_iter().enumerate() {
-            gather_into!(d, by_lane(STATE_FLOATS, a), d_at);
+            gather_into(d, m, by_lane(STATE_FLOATS, a), d_at);
         }
         let depth = _mm512_mask_i32gather_epi32::<4>(
             _mm512_setzero_si512(),
@@ -172,6 +164,30 @@ pub(super) unsafe fn hit_lanes(
     }
 }
 
+/// Into `dst`, in the lanes of `m`, the float `idx[k]` floats past `base`;
+/// `dst` keeps its own value in the other lanes (a masked gather whose
+/// source is `dst`, stored whole).
+///
+/// # Safety
+/// The CPU has AVX-512F; every masked lane's address is inside the table
+/// `base` points into.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+#[inline]
+unsafe fn gather_into(
+    dst: &mut [f32; LANES],
+    m: std::arch::x86_64::__mmask16,
+    idx: std::arch::x86_64::__m512i,
+    base: *const f32,
+) {
+    use std::arch::x86_64::*;
+    // SAFETY: the caller's addresses; 16-float loads and stores of `dst`.
+    unsafe {
+        let g = _mm512_mask_i32gather_ps::<4>(_mm512_loadu_ps(dst.as_ptr()), m, idx, base);
+        _mm512_storeu_ps(dst.as_mut_ptr(), g);
+    }
+}
+
 /// `integrator::packet_rays` for the AVX-512 kernel: the rays of the lanes
 /// `alive` — origin and direction from their path states, far end ∞ — into
 /// `rays`, one gather per component; the other lanes keep their values, as
@@ -192,10 +208,8 @@ pub(super) unsafe fn packet_rays(st: &[PathState; LANES], alive: LaneMask, rays:
         let d = sp.add(offset_of!(PathState, d)).cast::<f32>();
         for a in 0..3 {
             let idx = record_offsets(lane_numbers(), STATE_FLOATS, a);
-            let go = _mm512_mask_i32gather_ps::<4>(_mm512_loadu_ps(rays.o[a].as_ptr()), m, idx, o);
-            _mm512_storeu_ps(rays.o[a].as_mut_ptr(), go);
-            let gd = _mm512_mask_i32gather_ps::<4>(_mm512_loadu_ps(rays.d[a].as_ptr()), m, idx, d);
-            _mm512_storeu_ps(rays.d[a].as_mut_ptr(), gd);
+            gather_into(&mut rays.o[a], m, idx, o);
+            gather_into(&mut rays.d[a], m, idx, d);
         }
         _mm512_mask_storeu_ps(rays.tmax.as_mut_ptr(), m, _mm512_set1_ps(f32::INFINITY));
     }
