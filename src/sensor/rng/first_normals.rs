@@ -168,7 +168,7 @@ pub fn first_normals_avx2(
     out: FirstNormals<'_>,
 ) {
     use std::arch::x86_64::*;
-    const W: usize = 8;
+    const W: usize = 4;
     let q = |v: u64| _mm256_set1_epi64x(v as i64);
     // The low 64 bits of z·m for a constant m (its high half `m >> 32`).
     let mul = |z: __m256i, m: u64| {
@@ -219,27 +219,22 @@ pub fn first_normals_avx2(
         (x, _mm256_movemask_pd(ok))
     };
     let lanes = _mm256_setr_epi64x(0, 1, 2, 3);
-    // Four pixels from `item0`: both normals and their acceptance masks.
-    let four = |item0: u64| {
+    // One block of four at a time. Measured on a Zen 3 and dropped
+    // (docs/performance.md, *Twenty-eighth pass*): two independent blocks per
+    // iteration (6 % slower: register spills), the starts in a pass of their
+    // own (no faster), a fifth or sixth pixel drawn in scalar code beside the
+    // vector (8 % / 17 % slower), the cross products by one `vpmulld` (no faster).
+    in_blocks::<W>(x_table, stream_key, item0, out, |item0, x1, x2| {
         let item = _mm256_add_epi64(q(item0), lanes);
         let start = mix(_mm256_xor_si256(key, mul(item, ITEM_MUL)));
         let (xa, ma) = normal(mix(_mm256_add_epi64(start, g1)));
         let (xb, mb) = normal(mix(_mm256_add_epi64(start, g2)));
-        (xa, xb, ma as u32, mb as u32)
-    };
-    // Two independent halves a block, so the core overlaps their multiply
-    // chains (one half at a time left it waiting on them).
-    in_blocks::<W>(x_table, stream_key, item0, out, |item0, x1, x2| {
-        let (xa0, xb0, ma0, mb0) = four(item0);
-        let (xa1, xb1, ma1, mb1) = four(item0.wrapping_add(4));
-        // SAFETY: `in_blocks` hands out W = 8 floats in each of x1 and x2.
+        // SAFETY: `in_blocks` hands out W = 4 floats in each of x1 and x2.
         unsafe {
-            _mm256_storeu_pd(x1.as_mut_ptr(), xa0);
-            _mm256_storeu_pd(x1.as_mut_ptr().add(4), xa1);
-            _mm256_storeu_pd(x2.as_mut_ptr(), xb0);
-            _mm256_storeu_pd(x2.as_mut_ptr().add(4), xb1);
+            _mm256_storeu_pd(x1.as_mut_ptr(), xa);
+            _mm256_storeu_pd(x2.as_mut_ptr(), xb);
         }
-        (ma0 | ma1 << 4, mb0 | mb1 << 4)
+        (ma as u32, mb as u32)
     });
 }
 
