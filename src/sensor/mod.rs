@@ -8,6 +8,7 @@
 //! - [`relative_illumination`]: pixel/microlens relative illumination models;
 //! - [`pipeline`]: the model itself ([`simulate`], [`simulate_frame`], [`simulate_flat`]);
 //! - [`rng`]: counter-based per-pixel random streams, exact Poisson sampling;
+//! - [`prefetch`]: the next row's optical image brought into cache while a row's noise is drawn;
 //! - [`output`]: raw 16-bit PNG, DNG, demosaiced preview;
 //! - [`nnls`]: Lawson–Hanson NNLS and the paper's QE correction matrix (Eq. 2–3);
 //! - [`calibrate`]: Appendix III conversion gain, EMVA 1288 photon transfer;
@@ -22,6 +23,7 @@ pub mod flatfield;
 pub mod nnls;
 pub mod output;
 pub mod pipeline;
+pub mod prefetch;
 pub mod readout;
 pub mod relative_illumination;
 pub mod rng;

@@ -28,6 +28,7 @@
 //! `SensorConfig::fpn_seed`; temporal noise on the frame seed.
 
 use super::config::{Exposure, RelativeIllumination, SensorConfig};
+use super::prefetch::Prefetch;
 use super::readout::{Isa, Readout, RowOut, Scratch};
 pub use super::readout::{fpn_column, fpn_pixel};
 use crate::diag::{Error, Result};
@@ -200,7 +201,8 @@ fn run(cfg: &SensorConfig, oi: &OpticalImage, seed: u64, keep: bool) -> Result<S
         .all(|v| v.len() == 1 && v[0].1 == 1.0)
         && xm.weights.windows(2).all(|p| p[1][0].0 == p[0][0].0 + 1);
     // Signal rate (mean electrons per second, relative illumination included) of
-    // one window row; `true` when the row's irradiance is invalid.
+    // one window row; `true` when the row's irradiance is invalid, and the
+    // optical image the next row reads (the readout brings it into cache).
     let bad_anywhere;
     let rate_row: Box<RateRow> = if identity {
         // Same grid: one OI pixel per sensor pixel; f32 dot products over the bands,
@@ -220,13 +222,18 @@ fn run(cfg: &SensorConfig, oi: &OpticalImage, seed: u64, keep: bool) -> Result<S
             let oy = ym.weights[r][0].0 as usize;
             let chans = &phases[(yf % cfg.cfa.height) as usize];
             let base = (oy * oiw + x0) * nb;
-            let bad = dot_row(isa, &wf, chans, &irr[base..][..row.len() * nb], nb, row);
+            let len = row.len() * nb;
+            let bad = dot_row(isa, &wf, chans, &irr[base..][..len], nb, row);
             if use_ri {
                 for (cix, out) in row.iter_mut().enumerate() {
                     *out = (*out as f64 * ri_at(cfg, full, window.x + cix as u32, yf)) as f32;
                 }
             }
-            bad
+            let next = match ym.weights.get(r + 1) {
+                Some(w) => Prefetch::of(&irr[(w[0].0 as usize * oiw + x0) * nb..][..len]),
+                None => Prefetch::none(),
+            };
+            (bad, next)
         })
     } else {
         bad_anywhere = irr
@@ -251,7 +258,7 @@ fn run(cfg: &SensorConfig, oi: &OpticalImage, seed: u64, keep: bool) -> Result<S
                 }
                 *out = (acc * ri_at(cfg, full, xf, yf)) as f32;
             }
-            false
+            (false, Prefetch::none())
         })
     };
     const BAD_IRRADIANCE: &str = "optical image irradiance has negative or non-finite values";
@@ -479,7 +486,7 @@ pub fn simulate_flat(
             let xf = window.x + c as u32;
             *out = (per_ch[cfg.cfa.channel_at(xf, yf)] * ri_at(cfg, full, xf, yf)) as f32;
         }
-        false
+        (false, Prefetch::none())
     };
     Ok(expose(cfg, full, window, &rate_row, seed, true)?.0)
 }
@@ -532,7 +539,7 @@ pub fn resolve_exposure_s(cfg: &SensorConfig, rate_e_per_s: &[f32]) -> Result<f6
 
 /// The signal rate of one window row (index, output row); `true` when the row's
 /// irradiance is invalid.
-type RateRow<'a> = dyn Fn(usize, &mut [f32]) -> bool + Sync + 'a;
+type RateRow<'a> = dyn Fn(usize, &mut [f32]) -> (bool, Prefetch<'a>) + Sync + 'a;
 
 /// Expose `window` of a `full` sensor whose signal rate rows come from `rate_row`
 /// (which reports invalid irradiance), and read it out. With a fixed exposure time
@@ -560,7 +567,7 @@ fn expose(
             let bad = rate
                 .par_chunks_mut(ww)
                 .enumerate()
-                .map(|(r, row)| rate_row(r, row))
+                .map(|(r, row)| rate_row(r, row).0)
                 .reduce(|| false, |a, b| a || b);
             if bad {
                 return Ok((empty_frame(cfg, full, window), true));
@@ -605,15 +612,17 @@ fn expose(
         .map_init(
             || (Scratch::default(), vec![0f32; ww]),
             |(scratch, m), (r, (((d, e), v), mr))| {
-                let mut bad = false;
                 let m: &mut [f32] = match mr {
                     Some(mr) => mr,
                     None => m,
                 };
-                match &rate {
-                    Some(rate) => m.copy_from_slice(&rate[r * ww..(r + 1) * ww]),
-                    None => bad = rate_row(r, m),
-                }
+                let (bad, next_input) = match &rate {
+                    Some(rate) => {
+                        m.copy_from_slice(&rate[r * ww..(r + 1) * ww]);
+                        (false, Prefetch::none())
+                    }
+                    None => rate_row(r, m),
+                };
                 for x in m.iter_mut() {
                     *x = ro.mean_electrons(*x);
                 }
@@ -622,7 +631,7 @@ fn expose(
                     electrons: e,
                     volts: v,
                 };
-                ro.row(r, m, out, scratch);
+                ro.row(r, m, out, scratch, next_input);
                 bad
             },
         )

@@ -18,6 +18,7 @@
 //! driver `in_blocks`.
 
 use super::{GAMMA, ITEM_MUL, MIX_MUL, MIX_SHIFT, PixelRng, ZIG_N};
+use crate::sensor::prefetch::Prefetch;
 
 /// Where [`first_normals`] puts a row's normals: pixel c's first normal and
 /// whether `normal_fast` accepted it in `x1[c]`, `ok1[c]`, its second in `x2[c]`,
@@ -38,8 +39,10 @@ pub fn first_normals(
     stream_key: u64,
     item0: u64,
     out: FirstNormals<'_>,
+    warm: Prefetch<'_>,
 ) {
     let FirstNormals { x1, x2, ok1, ok2 } = out;
+    let mut warm = warm.over(x1.len());
     for (c, (((a, b), oa), ob)) in x1
         .iter_mut()
         .zip(x2.iter_mut())
@@ -47,6 +50,7 @@ pub fn first_normals(
         .zip(ok2.iter_mut())
         .enumerate()
     {
+        warm.step();
         let item = item0 + c as u64;
         (*a, *oa) = PixelRng::normal_fast(PixelRng::keyed_output(stream_key, item, 1), x_table);
         (*b, *ob) = PixelRng::normal_fast(PixelRng::keyed_output(stream_key, item, 2), x_table);
@@ -56,19 +60,22 @@ pub fn first_normals(
 /// [`first_normals`] `W` pixels at a time: `block(item, x1, x2)` writes the
 /// normals of the `W` pixels from stream item `item` into `x1` and `x2` and
 /// returns their acceptances as lane masks (bit j for lane j); the pixels after
-/// the last whole block by the plain loop.
+/// the last whole block by the plain loop. `warm` is spread over the blocks.
 #[inline(always)]
 fn in_blocks<const W: usize>(
     x_table: &[f64; ZIG_N + 1],
     stream_key: u64,
     item0: u64,
     out: FirstNormals<'_>,
+    warm: Prefetch<'_>,
     mut block: impl FnMut(u64, &mut [f64], &mut [f64]) -> (u32, u32),
 ) {
     let FirstNormals { x1, x2, ok1, ok2 } = out;
     let n = x1.len().min(x2.len()).min(ok1.len()).min(ok2.len());
     let whole = n / W * W;
+    let mut warm = warm.over(whole / W);
     for c in (0..whole).step_by(W) {
+        warm.step();
         let (m1, m2) = block(
             item0.wrapping_add(c as u64),
             &mut x1[c..c + W],
@@ -85,7 +92,13 @@ fn in_blocks<const W: usize>(
         ok1: &mut ok1[whole..n],
         ok2: &mut ok2[whole..n],
     };
-    first_normals(x_table, stream_key, item0.wrapping_add(whole as u64), rest);
+    first_normals(
+        x_table,
+        stream_key,
+        item0.wrapping_add(whole as u64),
+        rest,
+        warm,
+    );
 }
 
 /// [`first_normals`] eight pixels per instruction.
@@ -99,6 +112,7 @@ pub fn first_normals_avx512(
     stream_key: u64,
     item0: u64,
     out: FirstNormals<'_>,
+    warm: Prefetch<'_>,
 ) {
     use std::arch::x86_64::*;
     const W: usize = 8;
@@ -134,7 +148,7 @@ pub fn first_normals_avx512(
         (x, _mm512_cmp_pd_mask::<_CMP_LT_OQ>(_mm512_abs_pd(x), xi1))
     };
     let lanes = _mm512_setr_epi64(0, 1, 2, 3, 4, 5, 6, 7);
-    in_blocks::<W>(x_table, stream_key, item0, out, |item0, x1, x2| {
+    in_blocks::<W>(x_table, stream_key, item0, out, warm, |item0, x1, x2| {
         let item = _mm512_add_epi64(q(item0), lanes);
         let start = mix(_mm512_xor_si512(key, _mm512_mullo_epi64(item, k_item)));
         let (xa, ma) = normal(mix(_mm512_add_epi64(start, g1)));
@@ -166,6 +180,7 @@ pub fn first_normals_avx2(
     stream_key: u64,
     item0: u64,
     out: FirstNormals<'_>,
+    warm: Prefetch<'_>,
 ) {
     use std::arch::x86_64::*;
     const W: usize = 4;
@@ -224,7 +239,7 @@ pub fn first_normals_avx2(
     // iteration (6 % slower: register spills), the starts in a pass of their
     // own (no faster), a fifth or sixth pixel drawn in scalar code beside the
     // vector (8 % / 17 % slower), the cross products by one `vpmulld` (no faster).
-    in_blocks::<W>(x_table, stream_key, item0, out, |item0, x1, x2| {
+    in_blocks::<W>(x_table, stream_key, item0, out, warm, |item0, x1, x2| {
         let item = _mm256_add_epi64(q(item0), lanes);
         let start = mix(_mm256_xor_si256(key, mul(item, ITEM_MUL)));
         let (xa, ma) = normal(mix(_mm256_add_epi64(start, g1)));
@@ -281,7 +296,13 @@ mod tests {
                 };
                 let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
                 let (mut oa, mut ob) = (vec![false; n], vec![false; n]);
-                first_normals(zx, key, item0, rows(&mut a, &mut b, &mut oa, &mut ob));
+                first_normals(
+                    zx,
+                    key,
+                    item0,
+                    rows(&mut a, &mut b, &mut oa, &mut ob),
+                    Prefetch::none(),
+                );
                 check(&a, &b, &oa, &ob, "generic");
                 #[cfg(target_arch = "x86_64")]
                 if crate::sensor::readout::Isa::detect() == crate::sensor::readout::Isa::Avx512 {
@@ -289,7 +310,7 @@ mod tests {
                     let (mut oa, mut ob) = (vec![true; n], vec![true; n]);
                     let out = rows(&mut a, &mut b, &mut oa, &mut ob);
                     // SAFETY: the CPU has AVX-512 (Isa::detect).
-                    unsafe { first_normals_avx512(zx, key, item0, out) };
+                    unsafe { first_normals_avx512(zx, key, item0, out, Prefetch::none()) };
                     check(&a, &b, &oa, &ob, "avx512");
                 }
                 #[cfg(target_arch = "x86_64")]
@@ -298,7 +319,7 @@ mod tests {
                     let (mut oa, mut ob) = (vec![true; n], vec![true; n]);
                     let out = rows(&mut a, &mut b, &mut oa, &mut ob);
                     // SAFETY: the CPU has AVX2 (Isa::detect above baseline).
-                    unsafe { first_normals_avx2(zx, key, item0, out) };
+                    unsafe { first_normals_avx2(zx, key, item0, out, Prefetch::none()) };
                     check(&a, &b, &oa, &ob, "avx2");
                 }
             }
@@ -307,7 +328,13 @@ mod tests {
         let key = PixelRng::stream_key(3, 1);
         let (mut a, mut b) = (vec![0.0; 64], vec![0.0; 64]);
         let (mut oa, mut ob) = (vec![false; 64], vec![false; 64]);
-        first_normals(zx, key, 100, rows(&mut a, &mut b, &mut oa, &mut ob));
+        first_normals(
+            zx,
+            key,
+            100,
+            rows(&mut a, &mut b, &mut oa, &mut ob),
+            Prefetch::none(),
+        );
         let mut rejected = 0;
         for c in 0..64 {
             let mut r = PixelRng::keyed(key, 100 + c as u64);
