@@ -76,6 +76,13 @@ pub struct SensorImage {
 }
 
 impl SensorImage {
+    /// Hand the DV and electron buffers back for the next frame of a sequence
+    /// ([`crate::frame_buffer::for_overwrite`]).
+    pub fn recycle(self) {
+        crate::frame_buffer::recycle(self.dv);
+        crate::frame_buffer::recycle(self.electrons);
+    }
+
     pub fn width(&self) -> u32 {
         self.window.w
     }

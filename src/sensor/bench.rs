@@ -210,7 +210,8 @@ pub fn bench_sensor_runs(runs: usize) -> Result<SensorBench> {
             best = dt;
             best_cpu = dc;
         }
-        drop(im);
+        // as a sequence of frames does: the next frame writes to these pages
+        im.recycle();
     }
     Ok(SensorBench {
         width: w,

@@ -158,6 +158,7 @@ pub fn write_flat_sequence(
             super::output::write_dng(&d, &f.image, &c)?;
             files.push(d);
         }
+        f.recycle();
     }
     let rates = flat_rate_e_per_s(&c, &spec, &grid());
     let mut rows_out: Vec<(String, String)> = vec![
@@ -361,6 +362,7 @@ pub fn flat_sequence(
             }
         }
         out.push(px);
+        f.recycle();
     }
     Ok(FlatSequence {
         exposure_s,

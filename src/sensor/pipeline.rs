@@ -49,6 +49,16 @@ pub struct SensorFrame {
     pub mean_electrons: Vec<f32>,
 }
 
+impl SensorFrame {
+    /// Hand the frame's buffers back for the next frame of a sequence
+    /// ([`frame_buffer::for_overwrite`]).
+    pub fn recycle(self) {
+        self.image.recycle();
+        frame_buffer::recycle(self.volts);
+        frame_buffer::recycle(self.mean_electrons);
+    }
+}
+
 /// Electrons per second per unit irradiance, per channel and band:
 /// `w[c][b]` = k·QE_c(λ_b)·λ_b/(hc)·Δλ·A_pixel·FF, in e⁻/s per W/(m²·nm), with
 /// k the declared illuminance calibration factor (`illuminance-scale-factor`).
@@ -582,15 +592,17 @@ fn expose(
         }
     };
     let ro = Readout::new(cfg, full, window, t, seed);
+    // Every row below writes every element of its rows of these (a frame made
+    // from buffers full of NaN has none: `every_output_element_is_written`).
     let kept = || {
         if keep {
-            frame_buffer::zeroed(n)
+            frame_buffer::for_overwrite(n)
         } else {
             vec![]
         }
     };
-    let mut dv = frame_buffer::zeroed(n);
-    let mut electrons = frame_buffer::zeroed(n);
+    let mut dv = frame_buffer::for_overwrite(n);
+    let mut electrons = frame_buffer::for_overwrite(n);
     let mut volts = kept();
     let mut mean = kept();
     // Every output row with its index; volts and mean rows only when kept.

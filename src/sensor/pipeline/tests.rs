@@ -726,3 +726,37 @@ fn dot_row_gives_the_same_bits_at_every_level() {
         }
     }
 }
+
+/// Every element of a frame's outputs is written: with buffers full of NaN
+/// handed back to the pool (which `expose` takes its outputs from) a frame
+/// with every noise source on has no NaN in DV, electrons, volts or mean
+/// electrons. The frame is large enough for the pool (≥ 4 MiB a buffer).
+#[test]
+fn every_output_element_is_written() {
+    let mut c = rgb_linear();
+    c.sources = Sources::all();
+    c.sources.pixel_vignetting = false;
+    c.prnu = 0.01;
+    c.dsnu_v = 1e-3;
+    c.read_noise_v = 1e-3;
+    c.reset_noise_v = 1e-3;
+    c.column_fpn_gain = 0.01;
+    c.column_fpn_offset_v = 1e-3;
+    let (w, h) = (1100u32, 1000u32);
+    let oi = optical_image((w, h), Rect::new(0, 0, w, h), 2e-6);
+    let n = (w * h) as usize;
+    for _ in 0..4 {
+        crate::frame_buffer::recycle(vec![f32::NAN; n]);
+    }
+    let f = simulate_frame(&c, &oi, 3).unwrap();
+    for (name, v) in [
+        ("dv", &f.image.dv),
+        ("electrons", &f.image.electrons),
+        ("volts", &f.volts),
+        ("mean electrons", &f.mean_electrons),
+    ] {
+        assert_eq!(v.len(), n, "{name}");
+        let unwritten = v.iter().filter(|x| x.is_nan()).count();
+        assert_eq!(unwritten, 0, "{name}: {unwritten} elements not written");
+    }
+}
