@@ -36,7 +36,9 @@ pub fn ln_near(x: f64) -> f64 {
     let m1 = f64::from_bits((bits & 0x000f_ffff_ffff_ffff) | 0x3ff0_0000_0000_0000);
     let big = m1 > std::f64::consts::SQRT_2;
     let m = if big { 0.5 * m1 } else { m1 };
-    let e = ((bits >> 52) & 0x7ff) as i64 - 1023 + i64::from(big);
+    // i32, not i64: the conversion below then vectorises (`vcvtdq2pd`); from
+    // i64 the compiler converted lane by lane in scalar code before AVX-512.
+    let e = ((bits >> 52) & 0x7ff) as i32 - 1023 + i32::from(big);
     let f = m - 1.0;
     let s = f / (2.0 + f);
     let z = s * s;
@@ -46,7 +48,7 @@ pub fn ln_near(x: f64) -> f64 {
         p = p * z + 1.0 / (2 * j + 1) as f64;
     }
     let ln_m = 2.0 * s * p;
-    let r = e as f64 * std::f64::consts::LN_2 + ln_m;
+    let r = f64::from(e) * std::f64::consts::LN_2 + ln_m;
     if valid { r } else { f64::NAN }
 }
 
