@@ -1,6 +1,8 @@
-//! Zeroed `f32` frame buffers for image planes — the renderer's irradiance
-//! and standard errors, the sensor's outputs (DV, electrons, volts, mean
-//! electrons) — backed by transparent huge pages where Linux offers them.
+//! `f32` frame buffers for image planes — the renderer's irradiance and
+//! standard errors, the sensor's outputs (DV, electrons, volts, mean
+//! electrons) — backed by transparent huge pages where Linux offers them, and
+//! handed from one frame of a sequence to the next ([`recycle`],
+//! [`for_overwrite`]).
 //!
 //! A 12-megapixel frame is 48 MB per buffer. A fresh `vec![0f32; n]` of that
 //! size is mapped lazily: the first write to each 4 KiB page faults, and the
