@@ -53,9 +53,8 @@ impl<'a> Prefetch<'a> {
 
     /// The same span spread over `steps` steps (all of it by the last).
     pub fn over(self, steps: usize) -> Self {
-        let lines = self.end.saturating_sub(self.next).div_ceil(LINE);
         Self {
-            per_step: lines.div_ceil(steps.max(1)),
+            per_step: self.lines_left().div_ceil(steps.max(1)),
             ..self
         }
     }

@@ -132,7 +132,7 @@ impl PixelRng {
         let z = ziggurat();
         let bits = self.next_u64();
         let i = (bits & 0xff) as usize;
-        let u = 2.0 * ((bits >> 11) as f64 * (1.0 / (1u64 << 53) as f64)) - 1.0;
+        let u = ziggurat_u(bits);
         let x = u * z.x[i];
         if x.abs() < z.x[i + 1] {
             return x;
@@ -147,7 +147,7 @@ impl PixelRng {
     #[inline(always)]
     pub fn normal_fast(bits: u64, x_table: &[f64; ZIG_N + 1]) -> (f64, bool) {
         let i = (bits & 0xff) as usize;
-        let u = 2.0 * ((bits >> 11) as f64 * (1.0 / (1u64 << 53) as f64)) - 1.0;
+        let u = ziggurat_u(bits);
         let x = u * x_table[i];
         (x, x.abs() < x_table[i + 1])
     }
@@ -172,7 +172,7 @@ impl PixelRng {
             }
             let bits = self.next_u64();
             i = (bits & 0xff) as usize;
-            u = 2.0 * ((bits >> 11) as f64 * (1.0 / (1u64 << 53) as f64)) - 1.0;
+            u = ziggurat_u(bits);
             x = u * z.x[i];
             if x.abs() < z.x[i + 1] {
                 return x;
@@ -309,6 +309,15 @@ pub fn ziggurat_x() -> &'static [f64; ZIG_N + 1] {
 #[inline(always)]
 pub fn uniform_from_bits(bits: u64) -> f64 {
     u53_to_f64(bits >> 11) * (1.0 / (1u64 << 53) as f64)
+}
+
+/// The ziggurat's abscissa factor u in [−1, 1) from one 64-bit output (its top
+/// 53 bits; the layer comes from its low 8): what `normal`, `normal_fast` and
+/// `normal_slow` multiply a layer's edge by, and what `first_normals_avx512` /
+/// `first_normals_avx2` compute in vector lanes.
+#[inline(always)]
+fn ziggurat_u(bits: u64) -> f64 {
+    2.0 * uniform_from_bits(bits) - 1.0
 }
 
 /// `x as f64` for x < 2⁵³ (exact, the same value), in operations every vector
