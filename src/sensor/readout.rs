@@ -19,9 +19,11 @@
 
 use super::config::SensorConfig;
 use super::prefetch::Prefetch;
+#[cfg(target_arch = "x86_64")]
+use super::rng::RoundInsn;
 use super::rng::{
-    FirstNormals, LaneProposal, PixelRng, ZIG_N, fast_round, first_normals, ln_factorial_table,
-    ptrs_after_first_all, ptrs_constants, stream, ziggurat_x,
+    FirstNormals, LaneProposal, PixelRng, RoundBits, Rounding, ZIG_N, first_normals,
+    ln_factorial_table, ptrs_after_first_all, ptrs_constants, stream, ziggurat_x,
 };
 #[cfg(target_arch = "x86_64")]
 use super::rng::{first_normals_avx2, first_normals_avx512};
@@ -334,10 +336,10 @@ impl Readout {
             // SAFETY: `isa` was detected on this CPU (Isa::detect).
             Isa::Avx512 => unsafe { self.row_avx512(r, mean, out, s, next_input) },
             Isa::Avx2 => unsafe { self.row_avx2(r, mean, out, s, next_input) },
-            Isa::Baseline => self.row_generic(r, mean, out, s, next_input),
+            Isa::Baseline => self.row_generic::<RoundBits>(r, mean, out, s, next_input),
         }
         #[cfg(not(target_arch = "x86_64"))]
-        self.row_generic(r, mean, out, s, next_input)
+        self.row_generic::<RoundBits>(r, mean, out, s, next_input)
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -350,7 +352,7 @@ impl Readout {
         s: &mut Scratch,
         warm: Prefetch<'_>,
     ) {
-        self.row_generic(r, mean, out, s, warm)
+        self.row_generic::<RoundInsn>(r, mean, out, s, warm)
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -363,16 +365,17 @@ impl Readout {
         s: &mut Scratch,
         warm: Prefetch<'_>,
     ) {
-        self.row_generic(r, mean, out, s, warm)
+        self.row_generic::<RoundInsn>(r, mean, out, s, warm)
     }
 
     /// The row in passes: each first pass takes every pixel's common case
     /// branch-free (so it vectorises), and records the pixels that need more.
     /// `warm` is brought into cache by the two normal passes, half each (the
     /// passes with the most arithmetic per byte: 0.5 MB over ≈ 2 × 1000
-    /// blocks of a 4032-pixel row).
+    /// blocks of a 4032-pixel row). `R` is how the kernel rounds (the same
+    /// values either way: [`Rounding`]).
     #[inline(always)]
-    fn row_generic(
+    fn row_generic<R: Rounding>(
         &self,
         r: usize,
         mean: &[f32],
@@ -391,11 +394,11 @@ impl Readout {
             let kp = self.k_photon;
             for (c, ((e, ok), &m)) in s.e.iter_mut().zip(s.ok.iter_mut()).zip(mean).enumerate() {
                 let mu = m as f64;
-                let p = LaneProposal::new(kp, gi0 + c as u64, 1, mu, ptrs_constants(mu));
+                let p = LaneProposal::new::<R>(kp, gi0 + c as u64, 1, mu, ptrs_constants(mu));
                 *e = p.k;
                 *ok = (10.0..f64::INFINITY).contains(&mu) & p.exact & p.fast;
             }
-            self.finish_slow_photons(gi0, mean, s);
+            self.finish_slow_photons::<R>(gi0, mean, s);
         } else {
             for (e, &m) in s.e.iter_mut().zip(mean) {
                 *e = m as f64;
@@ -483,10 +486,10 @@ impl Readout {
             }
         }
         match (self.quantization, self.clipping) {
-            (false, false) => self.to_dv::<false, false>(v, dv),
-            (false, true) => self.to_dv::<false, true>(v, dv),
-            (true, false) => self.to_dv::<true, false>(v, dv),
-            (true, true) => self.to_dv::<true, true>(v, dv),
+            (false, false) => self.to_dv::<R, false, false>(v, dv),
+            (false, true) => self.to_dv::<R, false, true>(v, dv),
+            (true, false) => self.to_dv::<R, true, false>(v, dv),
+            (true, true) => self.to_dv::<R, true, true>(v, dv),
         }
         for (o, &e) in electrons.iter_mut().zip(e.iter()) {
             *o = e as f32;
@@ -539,7 +542,7 @@ impl Readout {
     /// finished side by side by [`ptrs_after_first_all`] where it can (the same
     /// values as the exact path), the others by the exact path.
     #[inline(always)]
-    fn finish_slow_photons(&self, gi0: u64, mean: &[f32], s: &mut Scratch) {
+    fn finish_slow_photons<R: Rounding>(&self, gi0: u64, mean: &[f32], s: &mut Scratch) {
         let kp = self.k_photon;
         // Gathered without a branch (a fifth of the pixels, at random): every
         // pixel is written at the next free place, which moves on past the slow ones.
@@ -561,7 +564,7 @@ impl Readout {
         s.slow_k.resize(s.slow.len(), 0.0);
         s.slow_done.clear();
         s.slow_done.resize(s.slow.len(), false);
-        ptrs_after_first_all(
+        ptrs_after_first_all::<R>(
             ln_factorial_table(),
             kp,
             gi0,
@@ -587,11 +590,15 @@ impl Readout {
     /// Digital values from volts: gain and black level, then rounding
     /// (`QUANTIZE`) and clipping to [0, white] (`CLIP`).
     #[inline(always)]
-    fn to_dv<const QUANTIZE: bool, const CLIP: bool>(&self, v: &[f64], dv: &mut [f32]) {
+    fn to_dv<R: Rounding, const QUANTIZE: bool, const CLIP: bool>(
+        &self,
+        v: &[f64],
+        dv: &mut [f32],
+    ) {
         for (o, &v) in dv.iter_mut().zip(v) {
             let mut d = v * self.dv_per_v + self.black;
             if QUANTIZE {
-                d = fast_round(d);
+                d = R::round(d);
             }
             if CLIP {
                 d = d.clamp(0.0, self.white);

@@ -12,10 +12,12 @@ use std::sync::OnceLock;
 
 mod first_normals;
 mod ptrs_squeeze;
+mod rounding;
 pub use first_normals::{FirstNormals, first_normals};
 #[cfg(target_arch = "x86_64")]
 pub use first_normals::{first_normals_avx2, first_normals_avx512};
 pub use ptrs_squeeze::{LaneProposal, ln_near, ptrs_after_first, ptrs_after_first_all};
+pub use rounding::{RoundBits, RoundInsn, Rounding};
 
 /// Stream identifiers (one per noise source) so sources never share numbers.
 pub mod stream {

@@ -168,8 +168,8 @@ pub fn first_normals_avx512(
 /// product, as `wrapping_mul`), the top 53 bits of an output converted as two
 /// exact halves (the high 21 bits and the low 32 bits, each put under an
 /// exponent and the exponent taken away, then added: exact below 2⁵³). The
-/// table entries by `vgatherqpd` and `normal_fast`'s IEEE operations as at
-/// AVX-512: the same bits.
+/// table entries by one 16-byte load a lane (x[i] and x[i + 1] side by side)
+/// and `normal_fast`'s IEEE operations as at AVX-512: the same bits.
 ///
 /// # Safety
 /// The CPU must have AVX2 (the readout's `Isa::Avx2`).
@@ -198,7 +198,6 @@ pub fn first_normals_avx2(
     let key = q(stream_key);
     let (g1, g2) = (q(GAMMA), q(GAMMA.wrapping_mul(2)));
     let low8 = q(0xff);
-    let one_i = q(1);
     let scale = _mm256_set1_pd(1.0 / (1u64 << 53) as f64);
     let (two, one) = (_mm256_set1_pd(2.0), _mm256_set1_pd(1.0));
     let abs_mask = _mm256_castsi256_pd(q(0x7fff_ffff_ffff_ffff));
@@ -222,12 +221,22 @@ pub fn first_normals_avx2(
         let lo = _mm256_castsi256_pd(_mm256_or_si256(_mm256_and_si256(top53, low32), e52));
         let top = _mm256_add_pd(_mm256_sub_pd(hi, e84_52), lo);
         let u = _mm256_sub_pd(_mm256_mul_pd(two, _mm256_mul_pd(top, scale)), one);
+        // Each lane's x[i] and x[i + 1] are neighbours in the table: one 16-byte
+        // load a lane, the four pairs then transposed into (x[i]…) and (x[i + 1]…).
+        // Zen 3's `vgatherqpd` took ≈ 8 cycles each (two a normal); this pass is
+        // 0.92 of its time with the gathers (docs/performance.md, *Thirtieth pass*).
         // SAFETY: i ≤ 255, so i and i + 1 index the table's ZIG_N + 1 = 257 entries.
         let (xi, xi1) = unsafe {
-            (
-                _mm256_i64gather_pd::<8>(table, i),
-                _mm256_i64gather_pd::<8>(table, _mm256_add_epi64(i, one_i)),
-            )
+            let pair = |k: i64| _mm_loadu_pd(table.add(k as usize));
+            let lo = _mm256_castsi256_si128(i);
+            let hi = _mm256_extracti128_si256::<1>(i);
+            let a = pair(_mm_cvtsi128_si64(lo));
+            let b = pair(_mm_extract_epi64::<1>(lo));
+            let c = pair(_mm_cvtsi128_si64(hi));
+            let d = pair(_mm_extract_epi64::<1>(hi));
+            let ac = _mm256_insertf128_pd::<1>(_mm256_castpd128_pd256(a), c);
+            let bd = _mm256_insertf128_pd::<1>(_mm256_castpd128_pd256(b), d);
+            (_mm256_unpacklo_pd(ac, bd), _mm256_unpackhi_pd(ac, bd))
         };
         let x = _mm256_mul_pd(u, xi);
         let ok = _mm256_cmp_pd::<_CMP_LT_OQ>(_mm256_and_pd(x, abs_mask), xi1);

@@ -21,8 +21,7 @@
 //! path: 11 % of the draws that failed the fast test at μ = 6000, 25 % at μ = 10.
 
 use super::{
-    TWO52, floor_below_2_52, ln_gamma_stirling, output_at, ptrs_constants, stream_start,
-    uniform_from_bits,
+    Rounding, TWO52, ln_gamma_stirling, output_at, ptrs_constants, stream_start, uniform_from_bits,
 };
 
 /// ln x for positive normal finite x, within 10⁻¹⁵·max(1, |ln x|) of libm's
@@ -85,20 +84,32 @@ pub struct LaneProposal {
 
 impl LaneProposal {
     /// The proposal from outputs `n`, `n + 1` of the stream of (`stream_key`,
-    /// `item`), for mean `mu` with `consts` = [`ptrs_constants`]`(mu)`.
+    /// `item`), for mean `mu` with `consts` = [`ptrs_constants`]`(mu)`; the floor
+    /// the [`Rounding`] `R` way (the same value either way).
     #[inline(always)]
-    pub fn new(stream_key: u64, item: u64, n: u64, mu: f64, consts: (f64, f64, f64, f64)) -> Self {
-        Self::from_start(stream_start(stream_key, item), n, mu, consts)
+    pub fn new<R: Rounding>(
+        stream_key: u64,
+        item: u64,
+        n: u64,
+        mu: f64,
+        consts: (f64, f64, f64, f64),
+    ) -> Self {
+        Self::from_start::<R>(stream_start(stream_key, item), n, mu, consts)
     }
 
     #[inline(always)]
-    fn from_start(start: u64, n: u64, mu: f64, (a, b, bm2, v_r): (f64, f64, f64, f64)) -> Self {
+    fn from_start<R: Rounding>(
+        start: u64,
+        n: u64,
+        mu: f64,
+        (a, b, bm2, v_r): (f64, f64, f64, f64),
+    ) -> Self {
         let u = uniform_from_bits(output_at(start, n)) - 0.5;
         let v = uniform_from_bits(output_at(start, n + 1));
         let us = 0.5 - u.abs();
         let x = (2.0 * a / us + b) * u + mu + 0.43;
         LaneProposal {
-            k: floor_below_2_52(x),
+            k: R::floor_below_2_52(x),
             us,
             v,
             fast: (us >= 0.07) & (v * bm2 <= v_r),
@@ -111,10 +122,15 @@ impl LaneProposal {
 /// `item`), as `PixelRng::keyed(stream_key, item).poisson(mu)` returns it, when
 /// PTRS accepts its first proposal or, that rejected, its second by the fast
 /// test: (k, true). (·, false) when the draw needs the exact path. `table` is
-/// [`ln_factorial_table`](super::ln_factorial_table). Branch-free, so a loop of
-/// these vectorises.
+/// [`ln_factorial_table`](super::ln_factorial_table); `R` rounds the proposals.
+/// Branch-free, so a loop of these vectorises.
 #[inline(always)]
-pub fn ptrs_after_first(table: &[f64; 256], stream_key: u64, item: u64, mu: f64) -> (f64, bool) {
+pub fn ptrs_after_first<R: Rounding>(
+    table: &[f64; 256],
+    stream_key: u64,
+    item: u64,
+    mu: f64,
+) -> (f64, bool) {
     let start = stream_start(stream_key, item);
     let consts = ptrs_constants(mu);
     let (a, b, _, _) = consts;
@@ -124,7 +140,7 @@ pub fn ptrs_after_first(table: &[f64; 256], stream_key: u64, item: u64, mu: f64)
         v,
         fast,
         exact,
-    } = LaneProposal::from_start(start, 1, mu, consts);
+    } = LaneProposal::from_start::<R>(start, 1, mu, consts);
     // The full test of the first proposal, as `poisson_ptrs_slow` writes it.
     let skip = (k < 0.0) | ((us < 0.013) & (v > us));
     let log_mu = ln_near(mu);
@@ -143,7 +159,7 @@ pub fn ptrs_after_first(table: &[f64; 256], stream_key: u64, item: u64, mu: f64)
     let delta = 1e-13 * scale;
     let accept1 = !skip & (lhs + delta < rhs);
     let reject1 = skip | (lhs > rhs + delta);
-    let second = LaneProposal::from_start(start, 3, mu, consts);
+    let second = LaneProposal::from_start::<R>(start, 3, mu, consts);
     let take2 = reject1 & second.fast & second.exact;
     let done = exact & (fast | accept1 | take2);
     (if fast | accept1 { k } else { second.k }, done)
@@ -154,7 +170,7 @@ pub fn ptrs_after_first(table: &[f64; 256], stream_key: u64, item: u64, mu: f64)
 /// computed 16 at a time into local arrays, which the compiler can prove apart
 /// from the ln k! table it gathers from, so the loop vectorises.
 #[inline(always)]
-pub fn ptrs_after_first_all(
+pub fn ptrs_after_first_all<R: Rounding>(
     table: &[f64; 256],
     stream_key: u64,
     item0: u64,
@@ -176,7 +192,7 @@ pub fn ptrs_after_first_all(
             (cc[j], mm[j]) = (u64::from(c), m);
         }
         for j in 0..W {
-            let (kj, dj) = ptrs_after_first(table, stream_key, item0 + cc[j], mm[j]);
+            let (kj, dj) = ptrs_after_first::<R>(table, stream_key, item0 + cc[j], mm[j]);
             (kk[j], dd[j]) = (kj, dj & (10.0..f64::INFINITY).contains(&mm[j]));
         }
         let n = cols.len();
@@ -187,7 +203,7 @@ pub fn ptrs_after_first_all(
 
 #[cfg(test)]
 mod tests {
-    use super::super::PixelRng;
+    use super::super::{PixelRng, RoundBits, RoundInsn};
     use super::*;
 
     /// Within 10⁻¹⁵·max(1, |ln x|) of libm over every binade of the normal
@@ -243,8 +259,15 @@ mod tests {
             let (mut slow, mut decided) = (0usize, 0usize);
             for item in 0..400_000u64 {
                 let want = PixelRng::keyed(key, item).poisson(mu);
-                let (got, done) =
-                    ptrs_after_first(super::super::ln_factorial_table(), key, item, mu);
+                let table = super::super::ln_factorial_table();
+                let (got, done) = ptrs_after_first::<RoundBits>(table, key, item, mu);
+                // the other rounding gives the same draws and decisions
+                let (got_i, done_i) = ptrs_after_first::<RoundInsn>(table, key, item, mu);
+                assert_eq!(
+                    (got_i.to_bits(), done_i),
+                    (got.to_bits(), done),
+                    "μ {mu}, {item}"
+                );
                 let first = PixelRng::keyed(key, item).poisson_ptrs_first(mu);
                 if done {
                     assert_eq!(got.to_bits(), want.to_bits(), "μ {mu}, item {item}");
