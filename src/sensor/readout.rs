@@ -12,7 +12,7 @@
 //! pixels, and the Poisson draws whose first PTRS proposal is rejected (an
 //! unpredictable branch: 1 − 0.86·v_r of them, 65 % at μ = 10, 33 % at 100, 24 % at
 //! 1000, 22 % at 6000) are finished in separate loops: gathered, then side by
-//! side by [`ptrs_after_first_all`] (PTRS's full test without libm, exact to the
+//! side by [`ptrs_after_rejected_all`] (PTRS's full test without libm, exact to the
 //! bit, and a second proposal), the few it leaves by the exact path. Each pixel sees
 //! exactly the operations, in the same order, of a pixel-by-pixel evaluation, so
 //! the split changes no value.
@@ -22,8 +22,8 @@ use super::prefetch::Prefetch;
 #[cfg(target_arch = "x86_64")]
 use super::rng::RoundInsn;
 use super::rng::{
-    FirstNormals, LaneProposal, PixelRng, RoundBits, Rounding, ZIG_N, first_normals,
-    ln_factorial_table, ptrs_after_first_all, ptrs_constants, stream, ziggurat_x,
+    FirstNormals, FirstProposal, PixelRng, RoundBits, Rounding, ZIG_N, first_normals,
+    ln_factorial_table, ptrs_after_rejected_all, stream, ziggurat_x,
 };
 #[cfg(target_arch = "x86_64")]
 use super::rng::{first_normals_avx2, first_normals_avx512};
@@ -193,10 +193,18 @@ pub struct Scratch {
     /// common case ([`first_normals`]).
     ok_a: Vec<bool>,
     ok_b: Vec<bool>,
+    /// Per pixel: its first PTRS proposal, a row per field but `k` (in `e`),
+    /// which the vectorised first pass writes whole registers of.
+    first_start: Vec<u64>,
+    first_b: Vec<f64>,
+    first_us: Vec<f64>,
+    first_v: Vec<f64>,
     /// The pixels whose first PTRS proposal failed the fast test (column
-    /// indices), their means, and what `ptrs_after_first` made of them.
+    /// indices), their means and first proposals, and what
+    /// `ptrs_after_rejected_all` made of them.
     slow: Vec<u32>,
     slow_mu: Vec<f64>,
+    slow_first: Vec<FirstProposal>,
     slow_k: Vec<f64>,
     slow_done: Vec<bool>,
 }
@@ -225,6 +233,10 @@ impl Scratch {
             fit_to(v, n);
         }
         for v in [&mut self.ok, &mut self.ok_a, &mut self.ok_b] {
+            fit_to(v, n);
+        }
+        fit_to(&mut self.first_start, n);
+        for v in [&mut self.first_b, &mut self.first_us, &mut self.first_v] {
             fit_to(v, n);
         }
     }
@@ -392,11 +404,16 @@ impl Readout {
         // non-finite means, rejected proposals) drawn in full after.
         if self.photon_noise {
             let kp = self.k_photon;
-            for (c, ((e, ok), &m)) in s.e.iter_mut().zip(s.ok.iter_mut()).zip(mean).enumerate() {
-                let mu = m as f64;
-                let p = LaneProposal::new::<R>(kp, gi0 + c as u64, 1, mu, ptrs_constants(mu));
-                *e = p.k;
-                *ok = (10.0..f64::INFINITY).contains(&mu) & p.exact & p.fast;
+            let n = mean.len();
+            let (start, b) = (&mut s.first_start[..n], &mut s.first_b[..n]);
+            let (us, v) = (&mut s.first_us[..n], &mut s.first_v[..n]);
+            let (e, ok) = (&mut s.e[..n], &mut s.ok[..n]);
+            for c in 0..n {
+                let mu = mean[c] as f64;
+                let (p, fast) = FirstProposal::new::<R>(kp, gi0 + c as u64, mu);
+                e[c] = p.k;
+                ok[c] = (10.0..f64::INFINITY).contains(&mu) & !p.k.is_nan() & fast;
+                (start[c], b[c], us[c], v[c]) = (p.start, p.b, p.us, p.v);
             }
             self.finish_slow_photons::<R>(gi0, mean, s);
         } else {
@@ -539,7 +556,7 @@ impl Readout {
     }
 
     /// The photon counts whose first PTRS proposal failed the fast test: gathered,
-    /// finished side by side by [`ptrs_after_first_all`] where it can (the same
+    /// finished side by side by [`ptrs_after_rejected_all`] where it can (the same
     /// values as the exact path), the others by the exact path.
     #[inline(always)]
     fn finish_slow_photons<R: Rounding>(&self, gi0: u64, mean: &[f32], s: &mut Scratch) {
@@ -560,15 +577,24 @@ impl Readout {
         }
         s.slow.truncate(m_slow);
         s.slow_mu.truncate(m_slow);
+        s.slow_first.clear();
+        s.slow_first.extend(s.slow.iter().map(|&c| {
+            let c = c as usize;
+            FirstProposal {
+                start: s.first_start[c],
+                b: s.first_b[c],
+                k: s.e[c],
+                us: s.first_us[c],
+                v: s.first_v[c],
+            }
+        }));
         s.slow_k.clear();
         s.slow_k.resize(s.slow.len(), 0.0);
         s.slow_done.clear();
         s.slow_done.resize(s.slow.len(), false);
-        ptrs_after_first_all::<R>(
+        ptrs_after_rejected_all::<R>(
             ln_factorial_table(),
-            kp,
-            gi0,
-            &s.slow,
+            &s.slow_first,
             &s.slow_mu,
             &mut s.slow_k,
             &mut s.slow_done,

@@ -16,7 +16,7 @@ mod rounding;
 pub use first_normals::{FirstNormals, first_normals};
 #[cfg(target_arch = "x86_64")]
 pub use first_normals::{first_normals_avx2, first_normals_avx512};
-pub use ptrs_squeeze::{LaneProposal, ln_near, ptrs_after_first, ptrs_after_first_all};
+pub use ptrs_squeeze::{FirstProposal, ln_near, ptrs_after_first, ptrs_after_rejected_all};
 pub use rounding::{RoundBits, RoundInsn, Rounding};
 
 /// Stream identifiers (one per noise source) so sources never share numbers.
@@ -43,8 +43,12 @@ pub struct PtrsProposal {
 /// a division off the common path.
 #[inline(always)]
 pub fn ptrs_constants(mu: f64) -> (f64, f64, f64, f64) {
-    let smu = mu.sqrt();
-    let b = 0.931 + 2.53 * smu;
+    ptrs_constants_from_b(0.931 + 2.53 * mu.sqrt())
+}
+
+/// [`ptrs_constants`] from its b = 0.931 + 2.53·√μ (the rest follows from b).
+#[inline(always)]
+pub fn ptrs_constants_from_b(b: f64) -> (f64, f64, f64, f64) {
     let a = -0.059 + 0.02483 * b;
     let bm2 = b - 2.0;
     (a, b, bm2, 0.9277 * bm2 - 3.6224)

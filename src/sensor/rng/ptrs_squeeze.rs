@@ -19,9 +19,16 @@
 //! that passes the fast test; everything else (a margin within δ, a third
 //! proposal, a proposal beyond ±2⁵², a log-density of 0) is left to the exact
 //! path: 11 % of the draws that failed the fast test at μ = 6000, 25 % at μ = 10.
+//!
+//! The readout's first pass keeps what its first proposals were drawn from
+//! ([`FirstProposal`]: the stream's start, PTRS's b, the proposal), and
+//! [`ptrs_after_rejected_all`] goes on from there for the pixels it gathers
+//! instead of drawing their first proposals again (the photon pass 0.95 of its
+//! time on the AVX2 EPYC, docs/performance.md, *Thirtieth pass*).
 
 use super::{
-    Rounding, TWO52, ln_gamma_stirling, output_at, ptrs_constants, stream_start, uniform_from_bits,
+    Rounding, TWO52, ln_gamma_stirling, output_at, ptrs_constants, ptrs_constants_from_b,
+    stream_start, uniform_from_bits,
 };
 
 /// ln x for positive normal finite x, within 10⁻¹⁵·max(1, |ln x|) of libm's
@@ -41,11 +48,14 @@ pub fn ln_near(x: f64) -> f64 {
     let f = m - 1.0;
     let s = f / (2.0 + f);
     let z = s * s;
-    // 2·atanh(s) = 2s·Σ z^j/(2j+1); z ≤ 0.0295, so z¹² ≤ 4·10⁻¹⁹ ends the series.
-    let mut p = 1.0 / 23.0;
-    for j in (0..11).rev() {
-        p = p * z + 1.0 / (2 * j + 1) as f64;
-    }
+    // 2·atanh(s) = 2s·Σ z^j/(2j+1); z ≤ 0.0295, so the terms from z¹⁰/21 ≤ 2.4·10⁻¹⁷
+    // on are left off. Estrin's scheme: pairs, then pairs of pairs, so the
+    // dependent chain is four multiply-adds deep instead of Horner's nine.
+    let c = |j: i32| 1.0 / (2 * j + 1) as f64;
+    let (z2, z4) = (z * z, (z * z) * (z * z));
+    let z8 = z4 * z4;
+    let q = |j: i32| c(j) + c(j + 1) * z;
+    let p = ((q(0) + q(2) * z2) + (q(4) + q(6) * z2) * z4) + q(8) * z8;
     let ln_m = 2.0 * s * p;
     let r = f64::from(e) * std::f64::consts::LN_2 + ln_m;
     if valid { r } else { f64::NAN }
@@ -69,34 +79,57 @@ fn ln_factorial_near(table: &[f64; 256], k: f64) -> f64 {
 /// One PTRS proposal from outputs `n` and `n + 1` of a stream, branch-free (so
 /// a loop of these vectorises): what `PixelRng::poisson_ptrs_first` computes
 /// from those outputs, its floor exact while `exact`. The readout's first pass
-/// and [`ptrs_after_first`] both take their proposals from here.
+/// ([`FirstProposal`]) and [`ptrs_after_first`] both take their proposals from
+/// here.
 #[derive(Clone, Copy)]
-pub struct LaneProposal {
+struct LaneProposal {
     /// The proposed count, ⌊x⌋.
-    pub k: f64,
+    k: f64,
     us: f64,
     v: f64,
     /// PTRS's fast acceptance test passed: `k` is the draw.
-    pub fast: bool,
+    fast: bool,
     /// |x| < 2⁵², where `k`, the floor of x, is exact.
-    pub exact: bool,
+    exact: bool,
+}
+
+/// The first PTRS proposal of a pixel's stream as the readout's first pass
+/// keeps it for the pixels whose fast test failed, so that
+/// [`ptrs_after_rejected_all`] goes on from it instead of drawing it again.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct FirstProposal {
+    /// The stream's start ([`stream_start`]), for the second proposal.
+    pub start: u64,
+    /// [`ptrs_constants`]' b for the pixel's mean (the others follow from it).
+    pub b: f64,
+    /// ⌊x⌋, NaN where that floor is not exact (|x| ≥ 2⁵²).
+    pub k: f64,
+    pub us: f64,
+    pub v: f64,
+}
+
+impl FirstProposal {
+    /// The first proposal (outputs 1 and 2) of the stream of (`stream_key`,
+    /// `item`) for mean `mu`, and whether PTRS's fast test accepted its `k`
+    /// (then the draw, when μ is in PTRS's range and `k` is not NaN); the floor
+    /// the [`Rounding`] `R` way (the same value either way). Branch-free.
+    #[inline(always)]
+    pub fn new<R: Rounding>(stream_key: u64, item: u64, mu: f64) -> (Self, bool) {
+        let start = stream_start(stream_key, item);
+        let consts = ptrs_constants(mu);
+        let p = LaneProposal::from_start::<R>(start, 1, mu, consts);
+        let first = FirstProposal {
+            start,
+            b: consts.1,
+            k: if p.exact { p.k } else { f64::NAN },
+            us: p.us,
+            v: p.v,
+        };
+        (first, p.fast)
+    }
 }
 
 impl LaneProposal {
-    /// The proposal from outputs `n`, `n + 1` of the stream of (`stream_key`,
-    /// `item`), for mean `mu` with `consts` = [`ptrs_constants`]`(mu)`; the floor
-    /// the [`Rounding`] `R` way (the same value either way).
-    #[inline(always)]
-    pub fn new<R: Rounding>(
-        stream_key: u64,
-        item: u64,
-        n: u64,
-        mu: f64,
-        consts: (f64, f64, f64, f64),
-    ) -> Self {
-        Self::from_start::<R>(stream_start(stream_key, item), n, mu, consts)
-    }
-
     #[inline(always)]
     fn from_start<R: Rounding>(
         start: u64,
@@ -131,16 +164,22 @@ pub fn ptrs_after_first<R: Rounding>(
     item: u64,
     mu: f64,
 ) -> (f64, bool) {
-    let start = stream_start(stream_key, item);
-    let consts = ptrs_constants(mu);
-    let (a, b, _, _) = consts;
-    let LaneProposal {
-        k,
-        us,
-        v,
-        fast,
-        exact,
-    } = LaneProposal::from_start::<R>(start, 1, mu, consts);
+    let (first, fast) = FirstProposal::new::<R>(stream_key, item, mu);
+    let (k, done) = after_rejected::<R>(table, mu, first);
+    (
+        if fast { first.k } else { k },
+        !first.k.is_nan() & (fast | done),
+    )
+}
+
+/// [`ptrs_after_first`] for a first proposal whose fast test failed: its full
+/// test, then the second proposal's fast test.
+#[inline(always)]
+fn after_rejected<R: Rounding>(table: &[f64; 256], mu: f64, first: FirstProposal) -> (f64, bool) {
+    let FirstProposal { start, b, k, us, v } = first;
+    let exact = !k.is_nan();
+    let consts = ptrs_constants_from_b(b);
+    let a = consts.0;
     // The full test of the first proposal, as `poisson_ptrs_slow` writes it.
     let skip = (k < 0.0) | ((us < 0.013) & (v > us));
     let log_mu = ln_near(mu);
@@ -161,41 +200,42 @@ pub fn ptrs_after_first<R: Rounding>(
     let reject1 = skip | (lhs > rhs + delta);
     let second = LaneProposal::from_start::<R>(start, 3, mu, consts);
     let take2 = reject1 & second.fast & second.exact;
-    let done = exact & (fast | accept1 | take2);
-    (if fast | accept1 { k } else { second.k }, done)
+    (
+        if accept1 { k } else { second.k },
+        exact & (accept1 | take2),
+    )
 }
 
-/// [`ptrs_after_first`] for the pixels `cols` (offsets from full-frame index
-/// `item0`) with means `mus`: `k[j]`, `done[j]` for `cols[j]`. The lanes are
-/// computed 16 at a time into local arrays, which the compiler can prove apart
-/// from the ln k! table it gathers from, so the loop vectorises.
+/// The draws of the pixels whose first proposals `first` (with means `mus`)
+/// failed the fast test, as [`ptrs_after_first`] gives them: `k[j]`, `done[j]`
+/// for `first[j]`; not done wherever μ is outside PTRS's range [10, ∞). The
+/// lanes are computed 16 at a time into local arrays, which the compiler can
+/// prove apart from the ln k! table it gathers from, so the loop vectorises.
 #[inline(always)]
-pub fn ptrs_after_first_all<R: Rounding>(
+pub fn ptrs_after_rejected_all<R: Rounding>(
     table: &[f64; 256],
-    stream_key: u64,
-    item0: u64,
-    cols: &[u32],
+    first: &[FirstProposal],
     mus: &[f64],
     k: &mut [f64],
     done: &mut [bool],
 ) {
     const W: usize = 16;
-    for (((cols, mus), k), done) in cols
+    for (((first, mus), k), done) in first
         .chunks(W)
         .zip(mus.chunks(W))
         .zip(k.chunks_mut(W))
         .zip(done.chunks_mut(W))
     {
         let (mut kk, mut dd) = ([0f64; W], [false; W]);
-        let (mut cc, mut mm) = ([0u64; W], [10f64; W]);
-        for (j, (&c, &m)) in cols.iter().zip(mus).enumerate() {
-            (cc[j], mm[j]) = (u64::from(c), m);
+        let (mut ff, mut mm) = ([FirstProposal::default(); W], [10f64; W]);
+        for (j, (&f, &m)) in first.iter().zip(mus).enumerate() {
+            (ff[j], mm[j]) = (f, m);
         }
         for j in 0..W {
-            let (kj, dj) = ptrs_after_first::<R>(table, stream_key, item0 + cc[j], mm[j]);
+            let (kj, dj) = after_rejected::<R>(table, mm[j], ff[j]);
             (kk[j], dd[j]) = (kj, dj & (10.0..f64::INFINITY).contains(&mm[j]));
         }
-        let n = cols.len();
+        let n = first.len();
         k.copy_from_slice(&kk[..n]);
         done.copy_from_slice(&dd[..n]);
     }
