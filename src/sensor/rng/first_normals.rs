@@ -198,12 +198,10 @@ pub fn first_normals_avx2(
     let key = q(stream_key);
     let (g1, g2) = (q(GAMMA), q(GAMMA.wrapping_mul(2)));
     let low8 = q(0xff);
-    let scale = _mm256_set1_pd(1.0 / (1u64 << 53) as f64);
-    let (two, one) = (_mm256_set1_pd(2.0), _mm256_set1_pd(1.0));
     let abs_mask = _mm256_castsi256_pd(q(0x7fff_ffff_ffff_ffff));
-    // 2⁵² and 2⁸⁴ as bit patterns, and their sum as a double.
-    let (e52, e84) = (q(0x4330_0000_0000_0000), q(0x4530_0000_0000_0000));
-    let e84_52 = _mm256_set1_pd((1u128 << 84) as f64 + (1u64 << 52) as f64);
+    // 2⁰ and 2³² as bit patterns, and 2³² + 2 as a double.
+    let (e0, e32) = (q(0x3ff0_0000_0000_0000), q(0x41f0_0000_0000_0000));
+    let e32_2 = _mm256_set1_pd((1u64 << 32) as f64 + 2.0);
     let low32 = q(0xffff_ffff);
     let mix = |z: __m256i| {
         let s0 = _mm256_srli_epi64::<{ MIX_SHIFT[0] as i32 }>(z);
@@ -217,10 +215,14 @@ pub fn first_normals_avx2(
     let normal = |bits: __m256i| {
         let i = _mm256_and_si256(bits, low8);
         let top53 = _mm256_srli_epi64::<11>(bits);
-        let hi = _mm256_castsi256_pd(_mm256_or_si256(_mm256_srli_epi64::<32>(top53), e84));
-        let lo = _mm256_castsi256_pd(_mm256_or_si256(_mm256_and_si256(top53, low32), e52));
-        let top = _mm256_add_pd(_mm256_sub_pd(hi, e84_52), lo);
-        let u = _mm256_sub_pd(_mm256_mul_pd(two, _mm256_mul_pd(top, scale)), one);
+        // u = 2·top·2⁻⁵³ − 1 = top·2⁻⁵² − 1 from the top 53 bits' two halves:
+        // hi = 2³² + h·2⁻²⁰ and lo = 1 + l·2⁻⁵² (the bits under an exponent);
+        // (hi − (2³² + 2)) = h·2⁻²⁰ − 2 is exact, and so is its sum with lo, which
+        // is u itself (a multiple of 2⁻⁵² in [−1, 1)): the same bits as
+        // `normal_fast`'s conversion, product and difference.
+        let hi = _mm256_castsi256_pd(_mm256_or_si256(_mm256_srli_epi64::<32>(top53), e32));
+        let lo = _mm256_castsi256_pd(_mm256_or_si256(_mm256_and_si256(top53, low32), e0));
+        let u = _mm256_add_pd(_mm256_sub_pd(hi, e32_2), lo);
         // Each lane's x[i] and x[i + 1] are neighbours in the table: one 16-byte
         // load a lane, the four pairs then transposed into (x[i]…) and (x[i + 1]…).
         // Zen 3's `vgatherqpd` took ≈ 8 cycles each (two a normal); this pass is
