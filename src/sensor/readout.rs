@@ -22,7 +22,7 @@ use super::prefetch::Prefetch;
 #[cfg(target_arch = "x86_64")]
 use super::rng::RoundInsn;
 use super::rng::{
-    FirstNormals, FirstProposal, PixelRng, RoundBits, Rounding, ZIG_N, first_normals,
+    FirstNormals, PixelRng, Proposal, RejectedDraws, RoundBits, Rounding, ZIG_N, first_normals,
     ln_factorial_table, ptrs_after_rejected_all, stream, ziggurat_x,
 };
 #[cfg(target_arch = "x86_64")]
@@ -199,14 +199,46 @@ pub struct Scratch {
     first_b: Vec<f64>,
     first_us: Vec<f64>,
     first_v: Vec<f64>,
-    /// The pixels whose first PTRS proposal failed the fast test (column
-    /// indices), their means and first proposals, and what
-    /// `ptrs_after_rejected_all` made of them.
-    slow: Vec<u32>,
-    slow_mu: Vec<f64>,
-    slow_first: Vec<FirstProposal>,
-    slow_k: Vec<f64>,
-    slow_done: Vec<bool>,
+    /// The pixels whose first PTRS proposal failed the fast test (`at`: column
+    /// indices) and what `ptrs_after_rejected_all` made of them.
+    slow: SlowRound,
+    /// Those of them whose second proposal's full test comes next (`at`:
+    /// indices into `slow`).
+    slow2: SlowRound,
+}
+
+/// The PTRS proposals of one round of [`Readout::finish_slow_photons`]: where
+/// each came from, its mean and proposal, and its draw
+/// ([`ptrs_after_rejected_all`]).
+#[derive(Default)]
+struct SlowRound {
+    at: Vec<u32>,
+    mu: Vec<f64>,
+    prop: Vec<Proposal>,
+    k: Vec<f64>,
+    done: Vec<bool>,
+    next: Vec<Proposal>,
+    pending: Vec<bool>,
+}
+
+impl SlowRound {
+    /// The draws of `prop` (with means `mu`), each followed by the proposal from
+    /// outputs `n_next` and `n_next + 1` of its stream.
+    #[inline(always)]
+    fn draw<R: Rounding>(&mut self, n_next: u64) {
+        let n = self.prop.len();
+        self.k.resize(n, 0.0);
+        self.done.resize(n, false);
+        self.next.resize(n, Proposal::default());
+        self.pending.resize(n, false);
+        let out = RejectedDraws {
+            k: &mut self.k,
+            done: &mut self.done,
+            next: &mut self.next,
+            pending: &mut self.pending,
+        };
+        ptrs_after_rejected_all::<R>(ln_factorial_table(), &self.prop, &self.mu, n_next, out);
+    }
 }
 
 impl Scratch {
@@ -410,7 +442,7 @@ impl Readout {
             let (e, ok) = (&mut s.e[..n], &mut s.ok[..n]);
             for c in 0..n {
                 let mu = mean[c] as f64;
-                let (p, fast) = FirstProposal::new::<R>(kp, gi0 + c as u64, mu);
+                let (p, fast) = Proposal::new::<R>(kp, gi0 + c as u64, mu);
                 e[c] = p.k;
                 ok[c] = (10.0..f64::INFINITY).contains(&mu) & !p.k.is_nan() & fast;
                 (start[c], b[c], us[c], v[c]) = (p.start, p.b, p.us, p.v);
@@ -564,23 +596,24 @@ impl Readout {
         // Gathered without a branch (a fifth of the pixels, at random): every
         // pixel is written at the next free place, which moves on past the slow ones.
         let n = mean.len();
-        s.slow.resize(n + 1, 0);
-        s.slow_mu.resize(n + 1, 0.0);
+        let r1 = &mut s.slow;
+        r1.at.resize(n + 1, 0);
+        r1.mu.resize(n + 1, 0.0);
         let mut m_slow = 0;
         // The rows as local slices: written through `s`, the loop reloaded
         // their addresses every pixel (perf annotate).
-        let (slow, slow_mu) = (&mut s.slow[..=n], &mut s.slow_mu[..=n]);
+        let (at, slow_mu) = (&mut r1.at[..=n], &mut r1.mu[..=n]);
         for (c, (&ok, &m)) in s.ok.iter().zip(mean).enumerate() {
-            slow[m_slow] = c as u32;
+            at[m_slow] = c as u32;
             slow_mu[m_slow] = m as f64;
             m_slow += usize::from(!ok);
         }
-        s.slow.truncate(m_slow);
-        s.slow_mu.truncate(m_slow);
-        s.slow_first.clear();
-        s.slow_first.extend(s.slow.iter().map(|&c| {
+        r1.at.truncate(m_slow);
+        r1.mu.truncate(m_slow);
+        r1.prop.clear();
+        r1.prop.extend(r1.at.iter().map(|&c| {
             let c = c as usize;
-            FirstProposal {
+            Proposal {
                 start: s.first_start[c],
                 b: s.first_b[c],
                 k: s.e[c],
@@ -588,23 +621,27 @@ impl Readout {
                 v: s.first_v[c],
             }
         }));
-        s.slow_k.clear();
-        s.slow_k.resize(s.slow.len(), 0.0);
-        s.slow_done.clear();
-        s.slow_done.resize(s.slow.len(), false);
-        ptrs_after_rejected_all::<R>(
-            ln_factorial_table(),
-            &s.slow_first,
-            &s.slow_mu,
-            &mut s.slow_k,
-            &mut s.slow_done,
-        );
-        for ((&c, &mu), (&k, &done)) in s
-            .slow
-            .iter()
-            .zip(&s.slow_mu)
-            .zip(s.slow_k.iter().zip(&s.slow_done))
-        {
+        r1.draw::<R>(3);
+        // The second proposals whose full test comes next (≈ 10 % of the first
+        // round at μ ≥ 1000): a second round, as the exact path's next step.
+        let r2 = &mut s.slow2;
+        r2.at.clear();
+        r2.mu.clear();
+        r2.prop.clear();
+        for (j, &p) in r1.pending.iter().enumerate() {
+            if p {
+                r2.at.push(j as u32);
+                r2.mu.push(r1.mu[j]);
+                r2.prop.push(r1.next[j]);
+            }
+        }
+        r2.draw::<R>(5);
+        for (&j, (&k, &done)) in r2.at.iter().zip(r2.k.iter().zip(&r2.done)) {
+            if done {
+                (r1.k[j as usize], r1.done[j as usize]) = (k, true);
+            }
+        }
+        for ((&c, &mu), (&k, &done)) in r1.at.iter().zip(&r1.mu).zip(r1.k.iter().zip(&r1.done)) {
             s.e[c as usize] = if done {
                 k
             } else {

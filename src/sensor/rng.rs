@@ -16,7 +16,9 @@ mod rounding;
 pub use first_normals::{FirstNormals, first_normals};
 #[cfg(target_arch = "x86_64")]
 pub use first_normals::{first_normals_avx2, first_normals_avx512};
-pub use ptrs_squeeze::{FirstProposal, ln_near, ptrs_after_first, ptrs_after_rejected_all};
+pub use ptrs_squeeze::{
+    Proposal, RejectedDraws, ln_near, ptrs_after_first, ptrs_after_rejected_all,
+};
 pub use rounding::{RoundBits, RoundInsn, Rounding};
 
 /// Stream identifiers (one per noise source) so sources never share numbers.

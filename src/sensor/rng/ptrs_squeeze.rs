@@ -21,7 +21,7 @@
 //! path: 11 % of the draws that failed the fast test at μ = 6000, 25 % at μ = 10.
 //!
 //! The readout's first pass keeps what its first proposals were drawn from
-//! ([`FirstProposal`]: the stream's start, PTRS's b, the proposal), and
+//! ([`Proposal`]: the stream's start, PTRS's b, the proposal), and
 //! [`ptrs_after_rejected_all`] goes on from there for the pixels it gathers
 //! instead of drawing their first proposals again (the photon pass 0.95 of its
 //! time on the AVX2 EPYC, docs/performance.md, *Thirtieth pass*).
@@ -79,7 +79,7 @@ fn ln_factorial_near(table: &[f64; 256], k: f64) -> f64 {
 /// One PTRS proposal from outputs `n` and `n + 1` of a stream, branch-free (so
 /// a loop of these vectorises): what `PixelRng::poisson_ptrs_first` computes
 /// from those outputs, its floor exact while `exact`. The readout's first pass
-/// ([`FirstProposal`]) and [`ptrs_after_first`] both take their proposals from
+/// ([`Proposal`]) and [`ptrs_after_first`] both take their proposals from
 /// here.
 #[derive(Clone, Copy)]
 struct LaneProposal {
@@ -93,11 +93,12 @@ struct LaneProposal {
     exact: bool,
 }
 
-/// The first PTRS proposal of a pixel's stream as the readout's first pass
-/// keeps it for the pixels whose fast test failed, so that
-/// [`ptrs_after_rejected_all`] goes on from it instead of drawing it again.
+/// A PTRS proposal of a pixel's stream whose fast test failed, kept for its
+/// full test: the first, as the readout's first pass keeps it (so that
+/// [`ptrs_after_rejected_all`] goes on from it instead of drawing it again),
+/// or the second, when the first was rejected and the second failed its fast test.
 #[derive(Clone, Copy, Debug, Default)]
-pub struct FirstProposal {
+pub struct Proposal {
     /// The stream's start ([`stream_start`]), for the second proposal.
     pub start: u64,
     /// [`ptrs_constants`]' b for the pixel's mean (the others follow from it).
@@ -108,7 +109,7 @@ pub struct FirstProposal {
     pub v: f64,
 }
 
-impl FirstProposal {
+impl Proposal {
     /// The first proposal (outputs 1 and 2) of the stream of (`stream_key`,
     /// `item`) for mean `mu`, and whether PTRS's fast test accepted its `k`
     /// (then the draw, when μ is in PTRS's range and `k` is not NaN); the floor
@@ -118,7 +119,7 @@ impl FirstProposal {
         let start = stream_start(stream_key, item);
         let consts = ptrs_constants(mu);
         let p = LaneProposal::from_start::<R>(start, 1, mu, consts);
-        let first = FirstProposal {
+        let first = Proposal {
             start,
             b: consts.1,
             k: if p.exact { p.k } else { f64::NAN },
@@ -164,19 +165,28 @@ pub fn ptrs_after_first<R: Rounding>(
     item: u64,
     mu: f64,
 ) -> (f64, bool) {
-    let (first, fast) = FirstProposal::new::<R>(stream_key, item, mu);
-    let (k, done) = after_rejected::<R>(table, mu, first);
+    let (first, fast) = Proposal::new::<R>(stream_key, item, mu);
+    let (k, done, _, _) = after_rejected::<R>(table, mu, first, 3);
     (
         if fast { first.k } else { k },
         !first.k.is_nan() & (fast | done),
     )
 }
 
-/// [`ptrs_after_first`] for a first proposal whose fast test failed: its full
-/// test, then the second proposal's fast test.
+/// A proposal `p` whose fast test failed: its full test, then the fast test of
+/// the next proposal, from outputs `n_next` and `n_next + 1` of the stream
+/// (3 after the first proposal, 5 after the second): (k, true) when either
+/// decides the draw; then the next proposal, and whether its full test comes
+/// next (the full test rejected `p` and the next failed its fast test but is
+/// exact). Branch-free.
 #[inline(always)]
-fn after_rejected<R: Rounding>(table: &[f64; 256], mu: f64, first: FirstProposal) -> (f64, bool) {
-    let FirstProposal { start, b, k, us, v } = first;
+fn after_rejected<R: Rounding>(
+    table: &[f64; 256],
+    mu: f64,
+    p: Proposal,
+    n_next: u64,
+) -> (f64, bool, Proposal, bool) {
+    let Proposal { start, b, k, us, v } = p;
     let exact = !k.is_nan();
     let consts = ptrs_constants_from_b(b);
     let a = consts.0;
@@ -198,46 +208,78 @@ fn after_rejected<R: Rounding>(table: &[f64; 256], mu: f64, first: FirstProposal
     let delta = 1e-13 * scale;
     let accept1 = !skip & (lhs + delta < rhs);
     let reject1 = skip | (lhs > rhs + delta);
-    let second = LaneProposal::from_start::<R>(start, 3, mu, consts);
+    let second = LaneProposal::from_start::<R>(start, n_next, mu, consts);
     let take2 = reject1 & second.fast & second.exact;
+    let pending = exact & reject1 & !second.fast & second.exact;
     (
         if accept1 { k } else { second.k },
         exact & (accept1 | take2),
+        Proposal {
+            start,
+            b,
+            k: second.k,
+            us: second.us,
+            v: second.v,
+        },
+        pending,
     )
 }
 
-/// The draws of the pixels whose first proposals `first` (with means `mus`)
-/// failed the fast test, as [`ptrs_after_first`] gives them: `k[j]`, `done[j]`
-/// for `first[j]`; not done wherever μ is outside PTRS's range [10, ∞). The
+/// Where [`ptrs_after_rejected_all`] puts the draws of its proposals (rows of
+/// their length): `k[j]` and `done[j]` for proposal j, and where its next
+/// proposal's full test comes next (`pending[j]`), that proposal in `next[j]`.
+pub struct RejectedDraws<'a> {
+    pub k: &'a mut [f64],
+    pub done: &'a mut [bool],
+    pub next: &'a mut [Proposal],
+    pub pending: &'a mut [bool],
+}
+
+/// The proposals `props` (with means `mus`) whose fast tests failed, each
+/// followed by the proposal from outputs `n_next`, `n_next + 1` (see
+/// `after_rejected`): their draws as the exact path makes them where decided;
+/// nothing is done or pending wherever μ is outside PTRS's range [10, ∞). For
+/// first proposals (`n_next` = 3) the draws are [`ptrs_after_first`]'s. The
 /// lanes are computed 16 at a time into local arrays, which the compiler can
 /// prove apart from the ln k! table it gathers from, so the loop vectorises.
 #[inline(always)]
 pub fn ptrs_after_rejected_all<R: Rounding>(
     table: &[f64; 256],
-    first: &[FirstProposal],
+    props: &[Proposal],
     mus: &[f64],
-    k: &mut [f64],
-    done: &mut [bool],
+    n_next: u64,
+    out: RejectedDraws<'_>,
 ) {
     const W: usize = 16;
-    for (((first, mus), k), done) in first
+    let RejectedDraws {
+        k,
+        done,
+        next,
+        pending,
+    } = out;
+    for ((((props, mus), k), done), (next, pending)) in props
         .chunks(W)
         .zip(mus.chunks(W))
         .zip(k.chunks_mut(W))
         .zip(done.chunks_mut(W))
+        .zip(next.chunks_mut(W).zip(pending.chunks_mut(W)))
     {
-        let (mut kk, mut dd) = ([0f64; W], [false; W]);
-        let (mut ff, mut mm) = ([FirstProposal::default(); W], [10f64; W]);
-        for (j, (&f, &m)) in first.iter().zip(mus).enumerate() {
+        let (mut kk, mut dd, mut pp) = ([0f64; W], [false; W], [false; W]);
+        let (mut ff, mut mm) = ([Proposal::default(); W], [10f64; W]);
+        let mut nn = [Proposal::default(); W];
+        for (j, (&f, &m)) in props.iter().zip(mus).enumerate() {
             (ff[j], mm[j]) = (f, m);
         }
         for j in 0..W {
-            let (kj, dj) = after_rejected::<R>(table, mm[j], ff[j]);
-            (kk[j], dd[j]) = (kj, dj & (10.0..f64::INFINITY).contains(&mm[j]));
+            let (kj, dj, nj, pj) = after_rejected::<R>(table, mm[j], ff[j], n_next);
+            let in_range = (10.0..f64::INFINITY).contains(&mm[j]);
+            (kk[j], dd[j], nn[j], pp[j]) = (kj, dj & in_range, nj, pj & in_range);
         }
-        let n = first.len();
+        let n = props.len();
         k.copy_from_slice(&kk[..n]);
         done.copy_from_slice(&dd[..n]);
+        next.copy_from_slice(&nn[..n]);
+        pending.copy_from_slice(&pp[..n]);
     }
 }
 
@@ -289,7 +331,10 @@ mod tests {
     /// at means from PTRS's threshold to 10⁹; the squeeze decides the fast-test
     /// failures it should (the first proposal's full test and a second
     /// proposal that passes the fast test: 75 % of them at μ = 10, 85–89 %
-    /// from μ = 137.5 on), and every fast-accepted draw.
+    /// from μ = 137.5 on), and every fast-accepted draw. The second round (the
+    /// second proposal's full test, then the third's fast test) decides the
+    /// exact path's draw too, and most of what the first left pending (75 % at
+    /// μ = 10, 84–88 % from μ = 137.5 to 10⁹; the test asks for 60 %).
     #[test]
     fn decided_draws_are_the_exact_draws() {
         let key = PixelRng::stream_key(77, 1);
@@ -297,6 +342,7 @@ mod tests {
             10.0, 10.5, 17.25, 137.5, 1000.0, 6000.0, 1.0e5, 3.3e7, 1.0e9,
         ] {
             let (mut slow, mut decided) = (0usize, 0usize);
+            let (mut pending, mut decided2) = (0usize, 0usize);
             for item in 0..400_000u64 {
                 let want = PixelRng::keyed(key, item).poisson(mu);
                 let table = super::super::ln_factorial_table();
@@ -317,6 +363,17 @@ mod tests {
                 } else {
                     slow += 1;
                     decided += usize::from(done);
+                    let (p1, _) = Proposal::new::<RoundInsn>(key, item, mu);
+                    let (_, _, p2, wait) = after_rejected::<RoundInsn>(table, mu, p1, 3);
+                    if wait {
+                        assert!(!done, "μ {mu}, item {item}: decided and pending");
+                        pending += 1;
+                        let (k2, done2, _, _) = after_rejected::<RoundInsn>(table, mu, p2, 5);
+                        if done2 {
+                            decided2 += 1;
+                            assert_eq!(k2.to_bits(), want.to_bits(), "μ {mu}, {item}, round 2");
+                        }
+                    }
                 }
             }
             let frac = decided as f64 / slow as f64;
@@ -324,6 +381,10 @@ mod tests {
             assert!(
                 frac > want_frac,
                 "μ {mu}: decided {decided} of {slow} slow draws"
+            );
+            assert!(
+                pending > 0 && decided2 as f64 > 0.6 * pending as f64,
+                "μ {mu}: the second round decided {decided2} of {pending}"
             );
         }
     }
