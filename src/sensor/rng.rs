@@ -642,8 +642,32 @@ mod tests {
                 (x.round() + 0.0).to_bits(),
                 "round {x}"
             );
+            // The vector kernels' two ways (`Rounding`), the floor where its
+            // callers use it.
+            for (round, way) in [(RoundBits::round(x), "bits"), (RoundInsn::round(x), "insn")] {
+                assert_eq!(
+                    round.to_bits(),
+                    (x.round() + 0.0).to_bits(),
+                    "{way} round {x}"
+                );
+            }
+            if x.abs() < TWO52 {
+                for (floor, way) in [
+                    (RoundBits::floor_below_2_52(x), "bits"),
+                    (RoundInsn::floor_below_2_52(x), "insn"),
+                ] {
+                    assert_eq!(
+                        floor.to_bits(),
+                        (x.floor() + 0.0).to_bits(),
+                        "{way} floor {x}"
+                    );
+                }
+            }
         }
         assert!(fast_floor(f64::NAN).is_nan() && fast_round(f64::NAN).is_nan());
+        assert!(
+            RoundInsn::round(f64::NAN).is_nan() && RoundInsn::floor_below_2_52(f64::NAN).is_nan()
+        );
     }
 
     #[test]

@@ -12,7 +12,8 @@
 //! readout row kernel's time (docs/performance.md, *Thirtieth pass*).
 //!
 //! Both give every value bit for bit as `x.floor() + 0.0` and `x.round() + 0.0`
-//! (libm's, a zero always +0) for every x (`rounding_levels_agree_with_libm`);
+//! (libm's, a zero always +0) for every x (`fast_floor_and_round_match_libm` in
+//! the parent module: zeros, halves and their neighbours, ±2⁵², infinities);
 //! which one a kernel takes changes its speed only. [`RoundInsn`] called from
 //! code compiled without SSE4.1 is correct, a libm call a value.
 
@@ -60,60 +61,5 @@ impl Rounding for RoundInsn {
         let t = x.trunc();
         let f = x - t;
         t + f64::from(u8::from(f >= 0.5)) - f64::from(u8::from(f <= -0.5))
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::super::{PixelRng, TWO52, fast_floor};
-    use super::*;
-
-    /// Both ways give libm's floor and round bit for bit (a zero as +0) at
-    /// zeros, halves and their neighbours, near and beyond 2⁵², at infinities
-    /// and at 10⁵ random values; NaN stays NaN. Below 2⁵² for the floor, as
-    /// the callers use it.
-    #[test]
-    fn rounding_levels_agree_with_libm() {
-        let mut xs = vec![
-            0.0,
-            -0.0,
-            1e-300,
-            -1e-300,
-            0.49999999999999994,
-            -0.49999999999999994,
-            TWO52 - 0.5,
-            -(TWO52 - 0.5),
-            TWO52,
-            -TWO52,
-            4.6e15,
-            -4.6e15,
-            1e300,
-            -1e300,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-        ];
-        for k in -40..=40 {
-            let h = k as f64 + 0.5;
-            xs.extend([k as f64, h, k as f64 + 0.25, k as f64 - 0.25]);
-            xs.extend([
-                f64::from_bits(h.to_bits() + 1),
-                f64::from_bits(h.to_bits() - 1),
-            ]);
-        }
-        let mut r = PixelRng::new(4, 4, 4);
-        xs.extend((0..100_000).map(|_| (r.uniform() - 0.5) * 2e4));
-        for x in xs {
-            let round = (x.round() + 0.0).to_bits();
-            assert_eq!(RoundBits::round(x).to_bits(), round, "bits round {x}");
-            assert_eq!(RoundInsn::round(x).to_bits(), round, "insn round {x}");
-            if x.abs() < TWO52 {
-                let floor = (x.floor() + 0.0).to_bits();
-                assert_eq!(fast_floor(x).to_bits(), floor, "fast floor {x}");
-                assert_eq!(RoundBits::floor_below_2_52(x).to_bits(), floor, "bits {x}");
-                assert_eq!(RoundInsn::floor_below_2_52(x).to_bits(), floor, "insn {x}");
-            }
-        }
-        assert!(RoundInsn::round(f64::NAN).is_nan() && RoundBits::round(f64::NAN).is_nan());
-        assert!(RoundInsn::floor_below_2_52(f64::NAN).is_nan());
     }
 }
