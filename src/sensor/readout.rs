@@ -13,7 +13,8 @@
 //! unpredictable branch: 1 − 0.86·v_r of them, 65 % at μ = 10, 33 % at 100, 24 % at
 //! 1000, 22 % at 6000) are finished in separate loops: gathered, then side by
 //! side by [`ptrs_after_rejected_all`] (PTRS's full test without libm, exact to the
-//! bit, and a second proposal), the few it leaves by the exact path. Each pixel sees
+//! bit, then the next proposal; two rounds, from the first pass's proposals), the
+//! few it leaves by the exact path. Each pixel sees
 //! exactly the operations, in the same order, of a pixel-by-pixel evaluation, so
 //! the split changes no value.
 
