@@ -168,7 +168,7 @@ pub fn first_normals_avx512(
 /// product, as `wrapping_mul`), the top 53 bits of an output converted as two
 /// exact halves (the high 21 bits and the low 32 bits, each put under an
 /// exponent and the exponent taken away, then added: exact below 2⁵³). The
-/// table entries by one 16-byte load a lane (x[i] and x[i + 1] side by side)
+/// table entries by one 16-byte load a lane (x\[i\] and x\[i + 1\] side by side)
 /// and `normal_fast`'s IEEE operations as at AVX-512: the same bits.
 ///
 /// # Safety

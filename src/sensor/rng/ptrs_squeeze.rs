@@ -99,7 +99,7 @@ struct LaneProposal {
 /// or the second, when the first was rejected and the second failed its fast test.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Proposal {
-    /// The stream's start ([`stream_start`]), for the second proposal.
+    /// The stream's start (its mixed key), for the later proposals.
     pub start: u64,
     /// [`ptrs_constants`]' b for the pixel's mean (the others follow from it).
     pub b: f64,
