@@ -50,7 +50,7 @@ pub fn ptrs_constants(mu: f64) -> (f64, f64, f64, f64) {
 
 /// [`ptrs_constants`] from its b = 0.931 + 2.53·√μ (the rest follows from b).
 #[inline(always)]
-pub fn ptrs_constants_from_b(b: f64) -> (f64, f64, f64, f64) {
+pub(super) fn ptrs_constants_from_b(b: f64) -> (f64, f64, f64, f64) {
     let a = -0.059 + 0.02483 * b;
     let bm2 = b - 2.0;
     (a, b, bm2, 0.9277 * bm2 - 3.6224)

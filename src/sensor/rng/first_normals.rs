@@ -230,12 +230,11 @@ pub fn first_normals_avx2(
         // SAFETY: i ≤ 255, so i and i + 1 index the table's ZIG_N + 1 = 257 entries.
         let (xi, xi1) = unsafe {
             let pair = |k: i64| _mm_loadu_pd(table.add(k as usize));
-            let lo = _mm256_castsi256_si128(i);
-            let hi = _mm256_extracti128_si256::<1>(i);
-            let a = pair(_mm_cvtsi128_si64(lo));
-            let b = pair(_mm_extract_epi64::<1>(lo));
-            let c = pair(_mm_cvtsi128_si64(hi));
-            let d = pair(_mm_extract_epi64::<1>(hi));
+            let (i01, i23) = (_mm256_castsi256_si128(i), _mm256_extracti128_si256::<1>(i));
+            let a = pair(_mm_cvtsi128_si64(i01));
+            let b = pair(_mm_extract_epi64::<1>(i01));
+            let c = pair(_mm_cvtsi128_si64(i23));
+            let d = pair(_mm_extract_epi64::<1>(i23));
             let ac = _mm256_insertf128_pd::<1>(_mm256_castpd128_pd256(a), c);
             let bd = _mm256_insertf128_pd::<1>(_mm256_castpd128_pd256(b), d);
             (_mm256_unpacklo_pd(ac, bd), _mm256_unpackhi_pd(ac, bd))
